@@ -1,0 +1,32 @@
+#version 460
+// Copies every field of every struct in vkrt_shared.h to a flat word array, in declaration
+// order, so a test can compare the std430 layout the shader sees with the C layout byte for
+// byte (tests/test_gpu.c, gpu_shared_layouts_match_c).
+#extension GL_GOOGLE_include_directive : require
+#include "vkrt_shared.h"
+
+layout(local_size_x = 1) in;
+layout(std430, set = 0, binding = 0) readonly buffer Nodes { vkrt_gpu_node nodes[]; };
+layout(std430, set = 0, binding = 1) readonly buffer Tris { vkrt_gpu_tri tris[]; };
+layout(std430, set = 0, binding = 2) readonly buffer Hits { vkrt_gpu_hit hits[]; };
+layout(std430, set = 0, binding = 3) writeonly buffer Words { uint words[]; };
+layout(push_constant) uniform PushBlock { vkrt_gpu_push p; };
+
+uint k = 0;
+void put(float v) { words[k++] = floatBitsToUint(v); }
+void put(uint v) { words[k++] = v; }
+void put(vec3 v) { put(v.x); put(v.y); put(v.z); }
+
+void main()
+{
+    // Element 1 of each array, so the array stride is checked too.
+    vkrt_gpu_node n = nodes[1];
+    put(n.bmin); put(n.left_first); put(n.bmax); put(n.tri_count);
+    vkrt_gpu_tri t = tris[1];
+    put(t.v0); put(t.prim_id); put(t.v1); put(t.n0); put(t.v2); put(t.n1); put(t.face_n); put(t.n2);
+    vkrt_gpu_hit h = hits[1];
+    put(h.t); put(h.tri); put(h.u); put(h.v);
+    put(p.eye); put(p.width); put(p.right); put(p.height); put(p.up); put(p.tile_x); put(p.forward);
+    put(p.tile_y); put(p.tile_width); put(p.tile_height); put(p.tri_first); put(p.tri_end); put(p.tri_total);
+    put(p.last_chunk); put(p.pad0); put(p.pad1);
+}

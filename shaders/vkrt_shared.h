@@ -1,0 +1,145 @@
+/* GPU data layouts shared by the C library (src/) and the GLSL shaders (shaders/).
+ *
+ * One definition for both sides, so the byte layout of a node or a triangle can never drift
+ * between the host that writes a buffer and the shader that reads it. Every struct is laid out
+ * for std430 and checked with _Static_assert on the C side; the shader test reads every field
+ * back on the device to check the same offsets at run time.
+ *
+ * Rule for new fields: only uint32_t, int32_t, float, and a vec3 immediately followed by a
+ * 4-byte scalar (a C float[3] is 12 bytes where std430 aligns vec3 to 16). */
+#ifndef VKRT_SHARED_H
+#define VKRT_SHARED_H
+
+#ifdef __STDC_VERSION__ /* C side; glslang never defines this */
+#include <stddef.h>
+#include <stdint.h>
+typedef struct vkrt_float3 { float x, y, z; } vkrt_float3;
+#define VKRT_FLOAT3 vkrt_float3
+#define VKRT_UINT uint32_t
+#define VKRT_STRUCT(name) typedef struct name name; struct name
+#else /* GLSL side */
+#define VKRT_FLOAT3 vec3
+#define VKRT_UINT uint
+#define VKRT_STRUCT(name) struct name
+#endif
+
+/* Workgroup shape: lavapipe packs 8 invocations along x into one SIMD group, so x is a
+ * multiple of 8 (8x8 measured fastest with 16x8 and 64x1; 4x4 was 2-8x slower). */
+#define VKRT_TRACE_GROUP_X 8
+#define VKRT_TRACE_GROUP_Y 8
+
+/* Descriptor bindings of trace.comp (set 0). */
+#define VKRT_BINDING_NODES 0
+#define VKRT_BINDING_TRIS 1
+#define VKRT_BINDING_IMAGE 2
+#define VKRT_BINDING_HITS 3
+
+/* Specialization constant ids: features a render does not use are compiled out instead of
+ * branched over (lavapipe pays nearly full price for an `if` that is false everywhere). */
+#define VKRT_SPEC_MODE 0
+#define VKRT_SPEC_TRAVERSAL 1
+#define VKRT_SPEC_HEAT 2
+
+/* Values of the specialization constants; the C side asserts they equal the public enums. */
+#define VKRT_GPU_MODE_NORMAL 1
+#define VKRT_GPU_MODE_DEPTH 2
+#define VKRT_GPU_MODE_HEATMAP 3
+#define VKRT_GPU_MODE_ID 4
+#define VKRT_GPU_TRAVERSAL_BVH 1
+#define VKRT_GPU_TRAVERSAL_NAIVE 2
+#define VKRT_GPU_HEAT_NODES 1
+#define VKRT_GPU_HEAT_LEAVES 2
+#define VKRT_GPU_HEAT_TRIS 3
+
+/* Traversal stack entries. With the nearer child visited first and the farther one pushed,
+ * the stack never holds more entries than the tree is deep, and every builder caps its depth
+ * at VKRT_MAX_BVH_DEPTH (a node that deep becomes a leaf). */
+#define VKRT_MAX_BVH_DEPTH 64
+#define VKRT_TRAVERSAL_STACK_SIZE VKRT_MAX_BVH_DEPTH
+
+/* Naive traversal tests at most this many triangles per dispatch: lavapipe silently stops a
+ * loop after 65,535 iterations per group of 8 invocations, so larger scenes are split into
+ * chunks whose closest hits are merged through the hit buffer. */
+#define VKRT_NAIVE_CHUNK_TRIS 8192u
+
+/* Miss value written to the id and depth channels. */
+#define VKRT_MISS (-1.0)
+
+/* BVH node, 32 bytes: two per 64-byte cache line.
+ * Interior node: tri_count == 0, children at left_first and left_first + 1.
+ * Leaf: triangles [left_first, left_first + tri_count) of the triangle array. */
+VKRT_STRUCT(vkrt_gpu_node) {
+    VKRT_FLOAT3 bmin;      /* offset  0 */
+    VKRT_UINT left_first;  /* offset 12 */
+    VKRT_FLOAT3 bmax;      /* offset 16 */
+    VKRT_UINT tri_count;   /* offset 28 */
+};
+
+/* Triangle, 64 bytes, in BVH order: the three corners, the unit face normal, the index of the
+ * triangle in the loaded file (what `id` mode shows) and the three unit vertex normals, each
+ * octahedrally encoded as two 16-bit snorm values (error below 1e-4 rad). */
+VKRT_STRUCT(vkrt_gpu_tri) {
+    VKRT_FLOAT3 v0;        /* offset  0 */
+    VKRT_UINT prim_id;     /* offset 12 */
+    VKRT_FLOAT3 v1;        /* offset 16 */
+    VKRT_UINT n0;          /* offset 28 */
+    VKRT_FLOAT3 v2;        /* offset 32 */
+    VKRT_UINT n1;          /* offset 44 */
+    VKRT_FLOAT3 face_n;    /* offset 48 */
+    VKRT_UINT n2;          /* offset 60 */
+};
+
+/* Closest hit of one pixel, carried between naive-traversal chunk dispatches. 16 bytes. */
+VKRT_STRUCT(vkrt_gpu_hit) {
+    float t;               /* offset  0; +inf while nothing was hit */
+    VKRT_UINT tri;         /* offset  4; index into the triangle array (BVH order) */
+    float u;               /* offset  8; barycentrics of the hit */
+    float v;               /* offset 12 */
+};
+
+/* Push constants of trace.comp, 96 bytes (Vulkan guarantees 128).
+ * Primary ray through pixel (x, y), with sx = 2 (x + 0.5) / width - 1 and
+ * sy = 1 - 2 (y + 0.5) / height: normalize(forward + sx * right + sy * up). */
+VKRT_STRUCT(vkrt_gpu_push) {
+    VKRT_FLOAT3 eye;       /* offset  0 */
+    VKRT_UINT width;       /* offset 12; whole image */
+    VKRT_FLOAT3 right;     /* offset 16; camera right scaled by tan(fov/2) * aspect */
+    VKRT_UINT height;      /* offset 28 */
+    VKRT_FLOAT3 up;        /* offset 32; camera up scaled by tan(fov/2) */
+    VKRT_UINT tile_x;      /* offset 44; pixel origin of this dispatch */
+    VKRT_FLOAT3 forward;   /* offset 48; unit view direction */
+    VKRT_UINT tile_y;      /* offset 60 */
+    VKRT_UINT tile_width;  /* offset 64 */
+    VKRT_UINT tile_height; /* offset 68 */
+    VKRT_UINT tri_first;   /* offset 72; naive traversal: first triangle of this chunk */
+    VKRT_UINT tri_end;     /* offset 76; naive traversal: one past the last of this chunk */
+    VKRT_UINT tri_total;   /* offset 80; triangles in the scene */
+    VKRT_UINT last_chunk;  /* offset 84; naive traversal: 1 when this chunk writes the image */
+    VKRT_UINT pad0;        /* offset 88 */
+    VKRT_UINT pad1;        /* offset 92 */
+};
+
+#ifdef __STDC_VERSION__
+_Static_assert(sizeof(vkrt_float3) == 12, "vkrt_float3 must be three packed floats");
+_Static_assert(sizeof(vkrt_gpu_node) == 32, "vkrt_gpu_node must match std430");
+_Static_assert(offsetof(vkrt_gpu_node, left_first) == 12, "vkrt_gpu_node.left_first must match std430");
+_Static_assert(offsetof(vkrt_gpu_node, bmax) == 16, "vkrt_gpu_node.bmax must match std430");
+_Static_assert(offsetof(vkrt_gpu_node, tri_count) == 28, "vkrt_gpu_node.tri_count must match std430");
+_Static_assert(sizeof(vkrt_gpu_tri) == 64, "vkrt_gpu_tri must match std430");
+_Static_assert(offsetof(vkrt_gpu_tri, prim_id) == 12, "vkrt_gpu_tri.prim_id must match std430");
+_Static_assert(offsetof(vkrt_gpu_tri, v1) == 16, "vkrt_gpu_tri.v1 must match std430");
+_Static_assert(offsetof(vkrt_gpu_tri, n0) == 28, "vkrt_gpu_tri.n0 must match std430");
+_Static_assert(offsetof(vkrt_gpu_tri, v2) == 32, "vkrt_gpu_tri.v2 must match std430");
+_Static_assert(offsetof(vkrt_gpu_tri, n1) == 44, "vkrt_gpu_tri.n1 must match std430");
+_Static_assert(offsetof(vkrt_gpu_tri, face_n) == 48, "vkrt_gpu_tri.face_n must match std430");
+_Static_assert(offsetof(vkrt_gpu_tri, n2) == 60, "vkrt_gpu_tri.n2 must match std430");
+_Static_assert(sizeof(vkrt_gpu_hit) == 16, "vkrt_gpu_hit must match std430");
+_Static_assert(sizeof(vkrt_gpu_push) == 96, "vkrt_gpu_push must match the push-constant range");
+_Static_assert(offsetof(vkrt_gpu_push, right) == 16, "vkrt_gpu_push.right must match std430");
+_Static_assert(offsetof(vkrt_gpu_push, up) == 32, "vkrt_gpu_push.up must match std430");
+_Static_assert(offsetof(vkrt_gpu_push, forward) == 48, "vkrt_gpu_push.forward must match std430");
+_Static_assert(offsetof(vkrt_gpu_push, tile_width) == 64, "vkrt_gpu_push.tile_width must match std430");
+_Static_assert(offsetof(vkrt_gpu_push, last_chunk) == 84, "vkrt_gpu_push.last_chunk must match std430");
+#endif
+
+#endif /* VKRT_SHARED_H */

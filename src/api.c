@@ -1,0 +1,250 @@
+/* Public entry points: validate the caller's input, fill defaults, call the modules. */
+#include <math.h>
+#include <string.h>
+#include <unistd.h>
+
+#include "camera.h"
+#include "context.h"
+#include "cpu_trace.h"
+#include "mesh.h"
+#include "scene_pack.h"
+
+#define DEFAULT_IMAGE_SIZE 1024u
+/* Rows or columns beyond this are surely a mistake (and keep width * height * 4 in range). */
+#define MAX_IMAGE_SIZE 65536u
+
+_Static_assert(VKRT_GPU_MODE_NORMAL == VKRT_MODE_NORMAL && VKRT_GPU_MODE_DEPTH == VKRT_MODE_DEPTH &&
+                   VKRT_GPU_MODE_HEATMAP == VKRT_MODE_HEATMAP && VKRT_GPU_MODE_ID == VKRT_MODE_ID,
+               "shader mode values must equal vkrt_mode");
+_Static_assert(VKRT_GPU_TRAVERSAL_BVH == VKRT_TRAVERSAL_BVH && VKRT_GPU_TRAVERSAL_NAIVE == VKRT_TRAVERSAL_NAIVE,
+               "shader traversal values must equal vkrt_traversal");
+_Static_assert(VKRT_GPU_HEAT_NODES == VKRT_HEAT_NODES && VKRT_GPU_HEAT_LEAVES == VKRT_HEAT_LEAVES &&
+                   VKRT_GPU_HEAT_TRIS == VKRT_HEAT_TRIS,
+               "shader heat values must equal vkrt_heat");
+
+static uint32_t online_cores(void)
+{
+    long n = sysconf(_SC_NPROCESSORS_ONLN);
+    return n > 0 ? (uint32_t)n : 1u;
+}
+
+vkrt_result vkrt_context_create(const vkrt_context_desc *desc, vkrt_context **out_ctx)
+{
+    if (!out_ctx) return VKRT_ERROR_INVALID_ARGUMENT;
+    *out_ctx = NULL;
+    vkrt_context_desc d = desc ? *desc : (vkrt_context_desc){ 0 };
+    core boot;
+    core_init(&boot, &d.allocator, d.log, d.log_user);
+    if (d.backend > VKRT_BACKEND_CPU)
+        return core_fail(&boot, VKRT_ERROR_INVALID_ARGUMENT, "vkrt_context_desc.backend has no valid value (%d)", (int)d.backend);
+    if ((d.allocator.alloc == NULL) != (d.allocator.free == NULL))
+        return core_fail(&boot, VKRT_ERROR_INVALID_ARGUMENT, "vkrt_context_desc.allocator needs both alloc and free, or neither");
+    vkrt_context *ctx = core_alloc(&boot, sizeof *ctx);
+    if (!ctx) return core_fail(&boot, VKRT_ERROR_OUT_OF_MEMORY, "out of memory creating the context");
+    memset(ctx, 0, sizeof *ctx);
+    ctx->core = boot;
+    ctx->backend = d.backend == VKRT_BACKEND_CPU ? VKRT_BACKEND_CPU : VKRT_BACKEND_GPU;
+    ctx->cpu_threads = d.cpu_threads ? d.cpu_threads : online_cores();
+    if (ctx->backend == VKRT_BACKEND_GPU) {
+        vkrt_result r = vk_context_create(&ctx->core, &d, &ctx->vk);
+        if (r != VKRT_OK) {
+            vkrt_context_destroy(ctx);
+            return r;
+        }
+    }
+    *out_ctx = ctx;
+    return VKRT_OK;
+}
+
+void vkrt_context_destroy(vkrt_context *ctx)
+{
+    if (!ctx) return;
+    vk_context_destroy(ctx->vk);
+    core c = ctx->core;
+    core_free(&c, ctx);
+}
+
+const char *vkrt_context_last_error(const vkrt_context *ctx)
+{
+    return ctx ? ctx->core.last_error : "vkrt_context is NULL";
+}
+
+uint32_t vkrt_context_validation_messages(const vkrt_context *ctx)
+{
+    return ctx && ctx->vk ? ctx->vk->validation_messages : 0;
+}
+
+const char *vkrt_context_device_name(const vkrt_context *ctx)
+{
+    if (!ctx) return "";
+    return ctx->vk ? ctx->vk->properties.deviceName : "CPU reference";
+}
+
+vkrt_result vkrt_devices_list(const vkrt_context_desc *desc, vkrt_device_info *out, uint32_t *inout_count)
+{
+    if (!inout_count) return VKRT_ERROR_INVALID_ARGUMENT;
+    core c;
+    core_init(&c, desc ? &desc->allocator : NULL, desc ? desc->log : NULL, desc ? desc->log_user : NULL);
+    return vk_devices_list(&c, out, inout_count);
+}
+
+/* ---- scenes ---- */
+
+void vkrt_scene_destroy(vkrt_scene *scene)
+{
+    if (!scene) return;
+    core *c = &scene->ctx->core;
+    if (scene->ctx->vk) gpu_scene_destroy(scene->ctx->vk, &scene->gpu);
+    bvh_destroy(c, &scene->bvh);
+    core_free(c, scene->tris);
+    core_free(c, scene);
+}
+
+static void fill_stats(vkrt_scene *s, const mesh *m, double load_ms)
+{
+    bvh_stats bs;
+    bvh_compute_stats(&s->bvh, &bs);
+    vkrt_scene_stats *st = &s->stats;
+    st->triangles = s->bvh.tri_count;
+    st->nodes = bs.nodes;
+    st->leaves = bs.leaves;
+    st->depth = bs.depth;
+    st->max_leaf_triangles = bs.max_leaf_triangles;
+    memcpy(st->leaf_histogram, bs.leaf_histogram, sizeof st->leaf_histogram);
+    st->sah_cost = bs.sah_cost;
+    st->load_ms = load_ms;
+    st->build_ms = s->bvh.build_ms;
+    st->node_bytes = (uint64_t)s->bvh.node_count * sizeof(vkrt_gpu_node);
+    st->triangle_bytes = (uint64_t)s->bvh.tri_count * sizeof(vkrt_gpu_tri);
+    memcpy(st->bounds_min, m->bounds_min, sizeof st->bounds_min);
+    memcpy(st->bounds_max, m->bounds_max, sizeof st->bounds_max);
+}
+
+vkrt_result vkrt_scene_create(vkrt_context *ctx, const vkrt_scene_desc *desc, vkrt_scene **out_scene)
+{
+    if (!ctx) return VKRT_ERROR_INVALID_ARGUMENT;
+    core *c = &ctx->core;
+    core_clear_error(c);
+    if (!out_scene) return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "out_scene is NULL");
+    *out_scene = NULL;
+    vkrt_scene_desc d = desc ? *desc : (vkrt_scene_desc){ 0 };
+    if (d.builder > VKRT_BVH_BUILDER_BINNED_SAH)
+        return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "vkrt_scene_desc.builder has no valid value (%d)", (int)d.builder);
+
+    mesh m = { 0 };
+    vkrt_result r = VKRT_ERROR_OUT_OF_MEMORY;
+    vkrt_scene *s = core_calloc_array(c, 1, sizeof *s);
+    if (!s) {
+        r = core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "out of memory creating the scene");
+        goto fail;
+    }
+    s->ctx = ctx;
+    double t0 = core_now_ms();
+    r = d.path ? mesh_load(c, d.path, &m) : mesh_make_builtin(c, &m);
+    if (r != VKRT_OK) goto fail;
+    if (!d.keep_world_coordinates) mesh_normalize(&m);
+    else mesh_update_bounds(&m);
+    double load_ms = core_now_ms() - t0;
+
+    bvh_build_desc bd = {
+        .builder = d.builder,
+        .max_leaf_size = d.max_leaf_size,
+        .progress = d.progress,
+        .progress_user = d.progress_user,
+    };
+    if ((r = bvh_build(c, &m, &bd, &s->bvh)) != VKRT_OK) goto fail;
+    s->tris = core_alloc_array(c, m.tri_count, sizeof *s->tris);
+    if (!s->tris) {
+        r = core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "out of memory packing %u triangles", m.tri_count);
+        goto fail;
+    }
+    scene_pack_triangles(&m, &s->bvh, s->tris);
+    fill_stats(s, &m, load_ms);
+    mesh_destroy(c, &m);
+    if (ctx->vk) {
+        r = gpu_scene_upload(ctx->vk, s->bvh.nodes, s->bvh.node_count, s->tris, s->bvh.tri_count, &s->gpu);
+        if (r != VKRT_OK) goto fail;
+    }
+    *out_scene = s;
+    return VKRT_OK;
+fail:
+    mesh_destroy(c, &m);
+    vkrt_scene_destroy(s);
+    return r;
+}
+
+vkrt_result vkrt_scene_stats_get(const vkrt_scene *scene, vkrt_scene_stats *out_stats)
+{
+    if (!scene || !out_stats) return VKRT_ERROR_INVALID_ARGUMENT;
+    *out_stats = scene->stats;
+    return VKRT_OK;
+}
+
+/* ---- rendering ---- */
+
+size_t vkrt_render_floats(uint32_t width, uint32_t height)
+{
+    size_t pixels = (size_t)width * height;
+    if (width && pixels / width != height) return 0;
+    if (pixels > SIZE_MAX / 4) return 0;
+    return pixels * 4;
+}
+
+vkrt_result vkrt_render(vkrt_context *ctx, vkrt_scene *scene, const vkrt_render_desc *desc, float *out_rgba,
+                        size_t out_floats, vkrt_render_stats *out_stats)
+{
+    if (!ctx) return VKRT_ERROR_INVALID_ARGUMENT;
+    core *c = &ctx->core;
+    core_clear_error(c);
+    if (out_stats) memset(out_stats, 0, sizeof *out_stats);
+    if (!scene) return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "scene is NULL");
+    if (scene->ctx != ctx) return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "the scene belongs to another context");
+    if (!out_rgba) return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "out_rgba is NULL");
+    vkrt_render_desc d = desc ? *desc : (vkrt_render_desc){ 0 };
+    if (!d.width) d.width = DEFAULT_IMAGE_SIZE;
+    if (!d.height) d.height = DEFAULT_IMAGE_SIZE;
+    if (d.width > MAX_IMAGE_SIZE || d.height > MAX_IMAGE_SIZE)
+        return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "image size %ux%u exceeds %u on a side", d.width, d.height,
+                         MAX_IMAGE_SIZE);
+    if (d.mode > VKRT_MODE_ID) return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "vkrt_render_desc.mode has no valid value (%d)", (int)d.mode);
+    if (d.traversal > VKRT_TRAVERSAL_NAIVE)
+        return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "vkrt_render_desc.traversal has no valid value (%d)", (int)d.traversal);
+    if (d.heat > VKRT_HEAT_TRIS) return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "vkrt_render_desc.heat has no valid value (%d)", (int)d.heat);
+    size_t needed = vkrt_render_floats(d.width, d.height);
+    if (out_floats < needed)
+        return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "out_rgba holds %zu floats; a %ux%u image needs %zu", out_floats,
+                         d.width, d.height, needed);
+    vkrt_gpu_push camera = { 0 };
+    vkrt_result r = camera_setup(c, &d.camera, d.width, d.height, &camera);
+    if (r != VKRT_OK) return r;
+    vkrt_mode mode = d.mode ? d.mode : VKRT_MODE_NORMAL;
+    vkrt_traversal traversal = d.traversal ? d.traversal : VKRT_TRAVERSAL_BVH;
+    vkrt_heat heat = d.heat ? d.heat : VKRT_HEAT_NODES;
+
+    double t0 = core_now_ms();
+    double trace_ms = 0.0;
+    if (ctx->vk) {
+        gpu_trace_params p = {
+            .camera = camera, .mode = mode, .traversal = traversal, .heat = heat,
+            .progress = d.progress, .progress_user = d.progress_user,
+        };
+        r = gpu_trace_render(ctx->vk, &scene->gpu, &p, out_rgba, &trace_ms);
+    } else {
+        cpu_trace_scene s = {
+            .nodes = scene->bvh.nodes, .node_count = scene->bvh.node_count,
+            .tris = scene->tris, .tri_count = scene->bvh.tri_count,
+        };
+        cpu_trace_params p = {
+            .camera = camera, .mode = mode, .traversal = traversal, .heat = heat, .threads = ctx->cpu_threads,
+            .progress = d.progress, .progress_user = d.progress_user,
+        };
+        r = cpu_trace_render(c, &s, &p, out_rgba);
+        trace_ms = core_now_ms() - t0;
+    }
+    if (r == VKRT_OK && out_stats) {
+        out_stats->trace_ms = trace_ms;
+        out_stats->total_ms = core_now_ms() - t0;
+        out_stats->rays = (uint64_t)d.width * d.height;
+    }
+    return r;
+}

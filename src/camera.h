@@ -1,0 +1,14 @@
+/* Turns the public camera description into the ray-generation basis both tracers use. */
+#ifndef VKRT_CAMERA_H
+#define VKRT_CAMERA_H
+
+#include "../shaders/vkrt_shared.h"
+#include "core.h"
+
+/* Resolves defaults (see vkrt_camera) and fills eye, right, up, forward, width and height of
+ * *push. Fails with VKRT_ERROR_INVALID_ARGUMENT (message naming the field) for a non-finite
+ * value, a field of view outside (0, 180), or an up vector parallel to the view direction. */
+vkrt_result camera_setup(core *c, const vkrt_camera *camera, uint32_t width, uint32_t height,
+                         vkrt_gpu_push *push);
+
+#endif

@@ -1,0 +1,25 @@
+/* The objects behind the public handles. */
+#ifndef VKRT_CONTEXT_H
+#define VKRT_CONTEXT_H
+
+#include "bvh.h"
+#include "core.h"
+#include "gpu_trace.h"
+#include "vk_context.h"
+
+struct vkrt_context {
+    core core;
+    vkrt_backend backend;      /* resolved: GPU or CPU */
+    uint32_t cpu_threads;      /* resolved: >= 1 */
+    vk_context *vk;            /* NULL for the CPU backend */
+};
+
+struct vkrt_scene {
+    vkrt_context *ctx;
+    bvh bvh;                   /* nodes and triangle order */
+    vkrt_gpu_tri *tris;        /* packed in BVH order; the CPU backend traces these */
+    gpu_scene gpu;             /* device copies (GPU backend) */
+    vkrt_scene_stats stats;
+};
+
+#endif

@@ -1,0 +1,53 @@
+/* The services every module of the library shares: the allocator, the log and the detail
+ * message of the last failure. A vkrt_context embeds one; modules that do not need Vulkan
+ * (loaders, BVH builders, the CPU tracer) take only this, so tests can drive them alone. */
+#ifndef VKRT_CORE_H
+#define VKRT_CORE_H
+
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+
+#include "vkrt.h"
+
+#define CORE_ERROR_SIZE 1024
+
+typedef struct core {
+    vkrt_allocator allocator;      /* patched: both functions set */
+    vkrt_log_fn log;               /* may be NULL */
+    void *log_user;
+    char last_error[CORE_ERROR_SIZE];
+} core;
+
+/* Fills a core from the user's choices; NULL functions become malloc/free. */
+void core_init(core *c, const vkrt_allocator *allocator, vkrt_log_fn log, void *log_user);
+
+/* All host memory of the library goes through these. core_alloc_array checks count * size
+ * for overflow; every function returns NULL on failure (and records nothing: the caller knows
+ * what it was allocating and reports it with core_fail). core_free(c, NULL) is a no-op. */
+void *core_alloc(core *c, size_t size);
+void *core_alloc_array(core *c, size_t count, size_t size);
+void *core_calloc_array(core *c, size_t count, size_t size);
+void core_free(core *c, void *pointer);
+/* Grows *array (of elements of elem_size) to hold at least `needed` elements, doubling.
+ * Returns 0 on success, -1 on overflow or out of memory (the array is then unchanged). */
+int core_grow(core *c, void **array, size_t *capacity, size_t needed, size_t elem_size);
+/* A copy of s made with the allocator, or NULL. */
+char *core_strdup(core *c, const char *s);
+
+/* Records a failure detail, sends it to the log at error level and returns `result`, so a
+ * failing path reads `return core_fail(c, VKRT_ERROR_IO, "%s: cannot open", path);`. */
+#if defined(__GNUC__)
+#define CORE_PRINTF(f, a) __attribute__((format(printf, f, a)))
+#else
+#define CORE_PRINTF(f, a)
+#endif
+vkrt_result core_fail(core *c, vkrt_result result, const char *format, ...) CORE_PRINTF(3, 4);
+void core_log(core *c, vkrt_log_level level, const char *format, ...) CORE_PRINTF(3, 4);
+void core_logv(core *c, vkrt_log_level level, const char *format, va_list args);
+void core_clear_error(core *c);
+
+/* Monotonic wall clock in milliseconds. */
+double core_now_ms(void);
+
+#endif

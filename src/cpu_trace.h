@@ -1,0 +1,33 @@
+/* The C reference tracer: the same camera, traversal, triangle test and per-mode outputs as
+ * shaders/trace.comp, over the same packed node and triangle arrays, multi-threaded over
+ * tiles. Everything the GPU image is checked against comes from here. */
+#ifndef VKRT_CPU_TRACE_H
+#define VKRT_CPU_TRACE_H
+
+#include "../shaders/vkrt_shared.h"
+#include "core.h"
+
+typedef struct cpu_trace_scene {
+    const vkrt_gpu_node *nodes;
+    uint32_t node_count;
+    const vkrt_gpu_tri *tris;
+    uint32_t tri_count;
+} cpu_trace_scene;
+
+typedef struct cpu_trace_params {
+    vkrt_gpu_push camera;       /* eye/right/up/forward/width/height as for the GPU; tile
+                                   fields ignored */
+    vkrt_mode mode;             /* resolved: never _DEFAULT */
+    vkrt_traversal traversal;   /* resolved */
+    vkrt_heat heat;             /* resolved */
+    uint32_t threads;           /* >= 1 */
+    vkrt_progress_fn progress;  /* may be NULL; called from the calling thread */
+    void *progress_user;
+} cpu_trace_params;
+
+/* Writes width * height * 4 floats to out_rgba. Returns VKRT_OK, VKRT_ERROR_CANCELLED, or
+ * VKRT_ERROR_OUT_OF_MEMORY / a thread-creation failure as VKRT_ERROR_LIMIT. */
+vkrt_result cpu_trace_render(core *c, const cpu_trace_scene *scene, const cpu_trace_params *params,
+                             float *out_rgba);
+
+#endif

@@ -1,0 +1,371 @@
+#include "gpu_trace.h"
+
+#include <math.h>
+#include <string.h>
+
+#include "vk_pipeline.h"
+
+/* Tiles bound the size of the storage image, the hit buffer and one submission; 256x256
+ * keeps a naive-traversal chunk well under a second on lavapipe. */
+#define TILE_SIZE 256u
+
+static vkrt_result check_range(vk_context *vk, VkDeviceSize bytes, const char *what)
+{
+    VkDeviceSize limit = vk->properties.limits.maxStorageBufferRange;
+    if (bytes > limit)
+        return core_fail(vk->core, VKRT_ERROR_LIMIT,
+                         "the scene's %s need %llu bytes, more than this device's storage buffer limit of %llu bytes",
+                         what, (unsigned long long)bytes, (unsigned long long)limit);
+    return VKRT_OK;
+}
+
+vkrt_result gpu_scene_upload(vk_context *vk, const vkrt_gpu_node *nodes, uint32_t node_count,
+                             const vkrt_gpu_tri *tris, uint32_t tri_count, gpu_scene *out)
+{
+    memset(out, 0, sizeof *out);
+    VkDeviceSize node_bytes = (VkDeviceSize)node_count * sizeof *nodes;
+    VkDeviceSize tri_bytes = (VkDeviceSize)tri_count * sizeof *tris;
+    vkrt_result r;
+    if ((r = check_range(vk, node_bytes, "BVH nodes")) != VKRT_OK) return r;
+    if ((r = check_range(vk, tri_bytes, "triangles")) != VKRT_OK) return r;
+    VkBufferUsageFlags usage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT;
+    if ((r = vk_buffer_create(vk, node_bytes, usage, VK_MEMORY_DEVICE, "vkrt BVH nodes", &out->nodes)) != VKRT_OK) goto fail;
+    if ((r = vk_buffer_create(vk, tri_bytes, usage, VK_MEMORY_DEVICE, "vkrt triangles", &out->tris)) != VKRT_OK) goto fail;
+    if ((r = vk_buffer_upload(vk, &out->nodes, nodes, node_bytes)) != VKRT_OK) goto fail;
+    if ((r = vk_buffer_upload(vk, &out->tris, tris, tri_bytes)) != VKRT_OK) goto fail;
+    out->node_count = node_count;
+    out->tri_count = tri_count;
+    return VKRT_OK;
+fail:
+    gpu_scene_destroy(vk, out);
+    return r;
+}
+
+void gpu_scene_destroy(vk_context *vk, gpu_scene *s)
+{
+    vk_buffer_destroy(vk, &s->nodes);
+    vk_buffer_destroy(vk, &s->tris);
+}
+
+/* Per-render device objects: one tile-sized storage image, its readback buffer, the hit buffer
+ * of naive traversal, a descriptor set and a timestamp query pool. */
+typedef struct render_objects {
+    VkImage image;
+    VkDeviceMemory image_memory;
+    VkImageView view;
+    vk_buffer readback;
+    vk_buffer hits;
+    VkDescriptorPool pool;
+    VkDescriptorSet set;
+    VkQueryPool queries;
+} render_objects;
+
+static void render_objects_destroy(vk_context *vk, render_objects *o)
+{
+    if (o->queries) vkDestroyQueryPool(vk->device, o->queries, NULL);
+    if (o->pool) vkDestroyDescriptorPool(vk->device, o->pool, NULL);
+    if (o->view) vkDestroyImageView(vk->device, o->view, NULL);
+    if (o->image) vkDestroyImage(vk->device, o->image, NULL);
+    if (o->image_memory) vkFreeMemory(vk->device, o->image_memory, NULL);
+    vk_buffer_destroy(vk, &o->readback);
+    vk_buffer_destroy(vk, &o->hits);
+}
+
+static vkrt_result create_image(vk_context *vk, uint32_t w, uint32_t h, render_objects *o)
+{
+    VkImageCreateInfo info = {
+        .sType = VK_STRUCTURE_TYPE_IMAGE_CREATE_INFO,
+        .imageType = VK_IMAGE_TYPE_2D,
+        .format = VK_FORMAT_R32G32B32A32_SFLOAT,
+        .extent = { w, h, 1 },
+        .mipLevels = 1,
+        .arrayLayers = 1,
+        .samples = VK_SAMPLE_COUNT_1_BIT,
+        .tiling = VK_IMAGE_TILING_OPTIMAL,
+        .usage = VK_IMAGE_USAGE_STORAGE_BIT | VK_IMAGE_USAGE_TRANSFER_SRC_BIT,
+        .initialLayout = VK_IMAGE_LAYOUT_UNDEFINED,
+    };
+    VkResult res = vkCreateImage(vk->device, &info, NULL, &o->image);
+    if (res != VK_SUCCESS) return vk_fail(vk, res, "vkCreateImage");
+    vk_label(vk, VK_OBJECT_TYPE_IMAGE, (uint64_t)o->image, "vkrt tile image");
+    VkMemoryRequirements req;
+    vkGetImageMemoryRequirements(vk->device, o->image, &req);
+    int type = -1;
+    for (uint32_t i = 0; i < vk->memory.memoryTypeCount && type < 0; i++)
+        if ((req.memoryTypeBits & (1u << i)) &&
+            (vk->memory.memoryTypes[i].propertyFlags & VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT))
+            type = (int)i;
+    for (uint32_t i = 0; i < vk->memory.memoryTypeCount && type < 0; i++)
+        if (req.memoryTypeBits & (1u << i)) type = (int)i;
+    if (type < 0) return core_fail(vk->core, VKRT_ERROR_VULKAN, "no memory type for the tile image");
+    VkMemoryAllocateInfo alloc = {
+        .sType = VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO,
+        .allocationSize = req.size,
+        .memoryTypeIndex = (uint32_t)type,
+    };
+    res = vkAllocateMemory(vk->device, &alloc, NULL, &o->image_memory);
+    if (res != VK_SUCCESS) return vk_fail(vk, res, "vkAllocateMemory (tile image)");
+    res = vkBindImageMemory(vk->device, o->image, o->image_memory, 0);
+    if (res != VK_SUCCESS) return vk_fail(vk, res, "vkBindImageMemory");
+    VkImageViewCreateInfo view = {
+        .sType = VK_STRUCTURE_TYPE_IMAGE_VIEW_CREATE_INFO,
+        .image = o->image,
+        .viewType = VK_IMAGE_VIEW_TYPE_2D,
+        .format = info.format,
+        .subresourceRange = { VK_IMAGE_ASPECT_COLOR_BIT, 0, 1, 0, 1 },
+    };
+    res = vkCreateImageView(vk->device, &view, NULL, &o->view);
+    if (res != VK_SUCCESS) return vk_fail(vk, res, "vkCreateImageView");
+    return VKRT_OK;
+}
+
+static vkrt_result create_descriptors(vk_context *vk, const gpu_scene *scene, VkDescriptorSetLayout layout,
+                                      render_objects *o)
+{
+    VkDescriptorPoolSize sizes[] = {
+        { VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 3 },
+        { VK_DESCRIPTOR_TYPE_STORAGE_IMAGE, 1 },
+    };
+    VkDescriptorPoolCreateInfo pool_info = {
+        .sType = VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO,
+        .maxSets = 1,
+        .poolSizeCount = 2,
+        .pPoolSizes = sizes,
+    };
+    VkResult res = vkCreateDescriptorPool(vk->device, &pool_info, NULL, &o->pool);
+    if (res != VK_SUCCESS) return vk_fail(vk, res, "vkCreateDescriptorPool");
+    VkDescriptorSetAllocateInfo alloc = {
+        .sType = VK_STRUCTURE_TYPE_DESCRIPTOR_SET_ALLOCATE_INFO,
+        .descriptorPool = o->pool,
+        .descriptorSetCount = 1,
+        .pSetLayouts = &layout,
+    };
+    res = vkAllocateDescriptorSets(vk->device, &alloc, &o->set);
+    if (res != VK_SUCCESS) return vk_fail(vk, res, "vkAllocateDescriptorSets");
+    VkDescriptorBufferInfo nodes = { scene->nodes.buffer, 0, VK_WHOLE_SIZE };
+    VkDescriptorBufferInfo tris = { scene->tris.buffer, 0, VK_WHOLE_SIZE };
+    VkDescriptorBufferInfo hits = { o->hits.buffer, 0, VK_WHOLE_SIZE };
+    VkDescriptorImageInfo image = { VK_NULL_HANDLE, o->view, VK_IMAGE_LAYOUT_GENERAL };
+    VkWriteDescriptorSet writes[] = {
+        { .sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET, .dstSet = o->set, .dstBinding = VKRT_BINDING_NODES,
+          .descriptorCount = 1, .descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, .pBufferInfo = &nodes },
+        { .sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET, .dstSet = o->set, .dstBinding = VKRT_BINDING_TRIS,
+          .descriptorCount = 1, .descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, .pBufferInfo = &tris },
+        { .sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET, .dstSet = o->set, .dstBinding = VKRT_BINDING_IMAGE,
+          .descriptorCount = 1, .descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_IMAGE, .pImageInfo = &image },
+        { .sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET, .dstSet = o->set, .dstBinding = VKRT_BINDING_HITS,
+          .descriptorCount = 1, .descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, .pBufferInfo = &hits },
+    };
+    vkUpdateDescriptorSets(vk->device, sizeof writes / sizeof writes[0], writes, 0, NULL);
+    return VKRT_OK;
+}
+
+static vkrt_result create_render_objects(vk_context *vk, const gpu_scene *scene, VkDescriptorSetLayout layout,
+                                         uint32_t tile_w, uint32_t tile_h, bool naive, render_objects *o)
+{
+    memset(o, 0, sizeof *o);
+    vkrt_result r = create_image(vk, tile_w, tile_h, o);
+    VkDeviceSize pixels = (VkDeviceSize)tile_w * tile_h;
+    if (r == VKRT_OK)
+        r = vk_buffer_create(vk, pixels * 4 * sizeof(float), VK_BUFFER_USAGE_TRANSFER_DST_BIT, VK_MEMORY_READBACK,
+                             "vkrt readback", &o->readback);
+    /* BVH traversal never reads the hit buffer, but the layout has the binding, so it gets a
+     * minimal one. */
+    if (r == VKRT_OK)
+        r = vk_buffer_create(vk, (naive ? pixels : 1) * sizeof(vkrt_gpu_hit),
+                             VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT, VK_MEMORY_DEVICE,
+                             "vkrt hits", &o->hits);
+    if (r == VKRT_OK) r = create_descriptors(vk, scene, layout, o);
+    if (r == VKRT_OK && vk->timestamps) {
+        VkQueryPoolCreateInfo q = {
+            .sType = VK_STRUCTURE_TYPE_QUERY_POOL_CREATE_INFO,
+            .queryType = VK_QUERY_TYPE_TIMESTAMP,
+            .queryCount = 2,
+        };
+        VkResult res = vkCreateQueryPool(vk->device, &q, NULL, &o->queries);
+        if (res != VK_SUCCESS) r = vk_fail(vk, res, "vkCreateQueryPool");
+    }
+    return r;
+}
+
+static uint32_t gpu_mode(vkrt_mode m)
+{
+    switch (m) {
+    case VKRT_MODE_DEPTH: return VKRT_GPU_MODE_DEPTH;
+    case VKRT_MODE_HEATMAP: return VKRT_GPU_MODE_HEATMAP;
+    case VKRT_MODE_ID: return VKRT_GPU_MODE_ID;
+    default: return VKRT_GPU_MODE_NORMAL;
+    }
+}
+
+static uint32_t gpu_heat(vkrt_heat h)
+{
+    switch (h) {
+    case VKRT_HEAT_LEAVES: return VKRT_GPU_HEAT_LEAVES;
+    case VKRT_HEAT_TRIS: return VKRT_GPU_HEAT_TRIS;
+    default: return VKRT_GPU_HEAT_NODES;
+    }
+}
+
+static uint32_t div_up(uint32_t a, uint32_t b)
+{
+    return (a + b - 1) / b;
+}
+
+/* Records one tile: trace dispatch(es), then a copy of the tile image into the readback buffer. */
+static void record_tile(VkCommandBuffer cmd, const vk_trace_pipeline *pipe, const render_objects *o,
+                        const gpu_scene *scene, vkrt_gpu_push push, bool naive, bool first_tile)
+{
+    /* The image's previous contents (an earlier tile, already copied out) are discarded. */
+    VkImageMemoryBarrier to_general = {
+        .sType = VK_STRUCTURE_TYPE_IMAGE_MEMORY_BARRIER,
+        .srcAccessMask = first_tile ? 0 : VK_ACCESS_TRANSFER_READ_BIT,
+        .dstAccessMask = VK_ACCESS_SHADER_WRITE_BIT,
+        .oldLayout = VK_IMAGE_LAYOUT_UNDEFINED,
+        .newLayout = VK_IMAGE_LAYOUT_GENERAL,
+        .srcQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED,
+        .dstQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED,
+        .image = o->image,
+        .subresourceRange = { VK_IMAGE_ASPECT_COLOR_BIT, 0, 1, 0, 1 },
+    };
+    vkCmdPipelineBarrier(cmd, first_tile ? VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT : VK_PIPELINE_STAGE_TRANSFER_BIT,
+                         VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 0, 0, NULL, 0, NULL, 1, &to_general);
+    if (o->queries) {
+        vkCmdResetQueryPool(cmd, o->queries, 0, 2);
+        vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, o->queries, 0);
+    }
+    vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, pipe->pipeline);
+    vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, pipe->layout, 0, 1, &o->set, 0, NULL);
+    uint32_t groups_x = div_up(push.tile_width, VKRT_TRACE_GROUP_X);
+    uint32_t groups_y = div_up(push.tile_height, VKRT_TRACE_GROUP_Y);
+    if (!naive) {
+        vkCmdPushConstants(cmd, pipe->layout, VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof push, &push);
+        vkCmdDispatch(cmd, groups_x, groups_y, 1);
+    } else {
+        /* t = +inf (0x7f800000) and no triangle (0xffffffff) would need two fills; a fill of
+         * the whole record with 0x7f800000 gives t = +inf, and the shader treats any hit with
+         * t = +inf as none, so one fill suffices. */
+        vkCmdFillBuffer(cmd, o->hits.buffer, 0, VK_WHOLE_SIZE, 0x7f800000u);
+        VkBufferMemoryBarrier fill_done = {
+            .sType = VK_STRUCTURE_TYPE_BUFFER_MEMORY_BARRIER,
+            .srcAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT,
+            .dstAccessMask = VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT,
+            .srcQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED,
+            .dstQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED,
+            .buffer = o->hits.buffer,
+            .size = VK_WHOLE_SIZE,
+        };
+        vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 0, 0, NULL, 1,
+                             &fill_done, 0, NULL);
+        for (uint32_t first = 0; first < scene->tri_count; first += VKRT_NAIVE_CHUNK_TRIS) {
+            push.tri_first = first;
+            push.tri_end = scene->tri_count - first > VKRT_NAIVE_CHUNK_TRIS ? first + VKRT_NAIVE_CHUNK_TRIS
+                                                                            : scene->tri_count;
+            push.last_chunk = push.tri_end == scene->tri_count;
+            vkCmdPushConstants(cmd, pipe->layout, VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof push, &push);
+            vkCmdDispatch(cmd, groups_x, groups_y, 1);
+            if (!push.last_chunk) {
+                /* Each chunk reads the closest hit the previous chunk wrote. */
+                VkMemoryBarrier chunk_done = {
+                    .sType = VK_STRUCTURE_TYPE_MEMORY_BARRIER,
+                    .srcAccessMask = VK_ACCESS_SHADER_WRITE_BIT,
+                    .dstAccessMask = VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT,
+                };
+                vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 0,
+                                     1, &chunk_done, 0, NULL, 0, NULL);
+            }
+        }
+    }
+    if (o->queries) vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, o->queries, 1);
+    /* The copy reads what the shader wrote. */
+    VkImageMemoryBarrier to_transfer = to_general;
+    to_transfer.srcAccessMask = VK_ACCESS_SHADER_WRITE_BIT;
+    to_transfer.dstAccessMask = VK_ACCESS_TRANSFER_READ_BIT;
+    to_transfer.oldLayout = VK_IMAGE_LAYOUT_GENERAL;
+    to_transfer.newLayout = VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL;
+    vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_PIPELINE_STAGE_TRANSFER_BIT, 0, 0, NULL, 0, NULL,
+                         1, &to_transfer);
+    VkBufferImageCopy region = {
+        .bufferRowLength = push.tile_width,
+        .bufferImageHeight = push.tile_height,
+        .imageSubresource = { VK_IMAGE_ASPECT_COLOR_BIT, 0, 0, 1 },
+        .imageExtent = { push.tile_width, push.tile_height, 1 },
+    };
+    vkCmdCopyImageToBuffer(cmd, o->image, VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL, o->readback.buffer, 1, &region);
+    /* The host reads the readback buffer after the fence. */
+    VkBufferMemoryBarrier to_host = {
+        .sType = VK_STRUCTURE_TYPE_BUFFER_MEMORY_BARRIER,
+        .srcAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT,
+        .dstAccessMask = VK_ACCESS_HOST_READ_BIT,
+        .srcQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED,
+        .dstQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED,
+        .buffer = o->readback.buffer,
+        .size = VK_WHOLE_SIZE,
+    };
+    vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_HOST_BIT, 0, 0, NULL, 1, &to_host, 0,
+                         NULL);
+}
+
+static double tile_device_ms(vk_context *vk, const render_objects *o)
+{
+    if (!o->queries) return 0.0;
+    uint64_t stamps[2];
+    VkResult res = vkGetQueryPoolResults(vk->device, o->queries, 0, 2, sizeof stamps, stamps, sizeof stamps[0],
+                                         VK_QUERY_RESULT_64_BIT | VK_QUERY_RESULT_WAIT_BIT);
+    if (res != VK_SUCCESS || stamps[1] < stamps[0]) return 0.0;
+    return (double)(stamps[1] - stamps[0]) * vk->timestamp_period_ns * 1e-6;
+}
+
+vkrt_result gpu_trace_render(vk_context *vk, const gpu_scene *scene, const gpu_trace_params *params,
+                             float *out_rgba, double *out_device_ms)
+{
+    *out_device_ms = 0.0;
+    const uint32_t width = params->camera.width, height = params->camera.height;
+    const bool naive = params->traversal == VKRT_TRAVERSAL_NAIVE;
+    vk_trace_variant variant = {
+        .mode = gpu_mode(params->mode),
+        .traversal = naive ? VKRT_GPU_TRAVERSAL_NAIVE : VKRT_GPU_TRAVERSAL_BVH,
+        .heat = gpu_heat(params->heat),
+    };
+    /* Only heatmap reads the heat kind: other modes share one pipeline whatever it is. */
+    if (variant.mode != VKRT_GPU_MODE_HEATMAP) variant.heat = VKRT_GPU_HEAT_NODES;
+    vk_trace_pipeline pipe;
+    vkrt_result r = vk_trace_pipeline_get(vk, variant, &pipe);
+    if (r != VKRT_OK) return r;
+
+    const uint32_t tile_w = width < TILE_SIZE ? width : TILE_SIZE;
+    const uint32_t tile_h = height < TILE_SIZE ? height : TILE_SIZE;
+    render_objects o;
+    r = create_render_objects(vk, scene, pipe.set_layout, tile_w, tile_h, naive, &o);
+    const uint32_t tiles_x = div_up(width, tile_w), tiles_y = div_up(height, tile_h);
+    const uint32_t tiles = tiles_x * tiles_y;
+    for (uint32_t t = 0; r == VKRT_OK && t < tiles; t++) {
+        if (params->progress && !params->progress(params->progress_user, "trace", (float)t / (float)tiles)) {
+            r = core_fail(vk->core, VKRT_ERROR_CANCELLED, "render cancelled by the progress callback");
+            break;
+        }
+        vkrt_gpu_push push = params->camera;
+        push.tile_x = (t % tiles_x) * tile_w;
+        push.tile_y = (t / tiles_x) * tile_h;
+        push.tile_width = width - push.tile_x < tile_w ? width - push.tile_x : tile_w;
+        push.tile_height = height - push.tile_y < tile_h ? height - push.tile_y : tile_h;
+        push.tri_first = 0;
+        push.tri_end = scene->tri_count;
+        push.tri_total = scene->tri_count;
+        push.last_chunk = 1;
+        VkCommandBuffer cmd;
+        if ((r = vk_commands_begin(vk, &cmd)) != VKRT_OK) break;
+        record_tile(cmd, &pipe, &o, scene, push, naive, t == 0);
+        if ((r = vk_commands_submit_wait(vk, cmd)) != VKRT_OK) break;
+        *out_device_ms += tile_device_ms(vk, &o);
+        if ((r = vk_buffer_invalidate(vk, &o.readback)) != VKRT_OK) break;
+        const float *src = o.readback.mapped;
+        for (uint32_t y = 0; y < push.tile_height; y++) {
+            float *dst = out_rgba + ((size_t)(push.tile_y + y) * width + push.tile_x) * 4;
+            memcpy(dst, src + (size_t)y * push.tile_width * 4, (size_t)push.tile_width * 4 * sizeof(float));
+        }
+    }
+    if (r == VKRT_OK && params->progress) params->progress(params->progress_user, "trace", 1.0f);
+    render_objects_destroy(vk, &o);
+    return r;
+}

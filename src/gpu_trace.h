@@ -1,0 +1,36 @@
+/* Drives shaders/trace.comp: scene buffers on the device, and a render as a sequence of tile
+ * dispatches (each its own submission, so progress and cancellation happen between them). */
+#ifndef VKRT_GPU_TRACE_H
+#define VKRT_GPU_TRACE_H
+
+#include "../shaders/vkrt_shared.h"
+#include "vk_buffer.h"
+
+typedef struct gpu_scene {
+    vk_buffer nodes;
+    vk_buffer tris;
+    uint32_t node_count;
+    uint32_t tri_count;
+} gpu_scene;
+
+/* Fails with VKRT_ERROR_LIMIT (naming the buffer and the device limit) when an array exceeds
+ * the device's maxStorageBufferRange. */
+vkrt_result gpu_scene_upload(vk_context *vk, const vkrt_gpu_node *nodes, uint32_t node_count,
+                             const vkrt_gpu_tri *tris, uint32_t tri_count, gpu_scene *out);
+void gpu_scene_destroy(vk_context *vk, gpu_scene *s);
+
+typedef struct gpu_trace_params {
+    vkrt_gpu_push camera;      /* eye/right/up/forward/width/height filled by camera_setup */
+    vkrt_mode mode;            /* resolved */
+    vkrt_traversal traversal;  /* resolved */
+    vkrt_heat heat;            /* resolved */
+    vkrt_progress_fn progress; /* may be NULL */
+    void *progress_user;
+} gpu_trace_params;
+
+/* Writes width * height * 4 floats (rows top to bottom) to out_rgba; *out_device_ms gets the
+ * summed device time of the trace dispatches (0 where the queue has no timestamps). */
+vkrt_result gpu_trace_render(vk_context *vk, const gpu_scene *scene, const gpu_trace_params *params,
+                             float *out_rgba, double *out_device_ms);
+
+#endif

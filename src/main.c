@@ -1,0 +1,483 @@
+/* vkrt command-line program: a thin layer over vkrt.h. */
+#include <errno.h>
+#include <inttypes.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <strings.h>
+#include <sys/stat.h>
+
+#include "vkrt.h"
+
+/* Exit codes (documented in README and --help). */
+enum {
+    EXIT_OK = 0,
+    EXIT_INTERNAL = 1,
+    EXIT_USAGE = 2,
+    EXIT_INPUT = 3,
+    EXIT_DEVICE = 4,
+    EXIT_VALIDATION = 5,
+};
+
+static int verbosity = 1; /* 0 quiet, 1 normal, 2 verbose */
+/* The last error the library logged: the only detail left when creating a context fails. */
+static char last_logged_error[1024];
+
+static void on_log(void *user, vkrt_log_level level, const char *message)
+{
+    (void)user;
+    /* Errors are printed once by the command from vkrt_context_last_error(). */
+    if (level == VKRT_LOG_ERROR) {
+        snprintf(last_logged_error, sizeof last_logged_error, "%s", message);
+        if (strncmp(message, "Vulkan validation", 17) == 0) fprintf(stderr, "vkrt: %s\n", message);
+        return;
+    }
+    if (level == VKRT_LOG_WARN && verbosity >= 1) fprintf(stderr, "vkrt: warning: %s\n", message);
+    else if (level >= VKRT_LOG_INFO && verbosity >= 2) fprintf(stderr, "vkrt: %s\n", message);
+}
+
+static int exit_code_for(vkrt_result r)
+{
+    switch (r) {
+    case VKRT_OK: return EXIT_OK;
+    case VKRT_ERROR_INVALID_ARGUMENT: return EXIT_USAGE;
+    case VKRT_ERROR_IO:
+    case VKRT_ERROR_PARSE:
+    case VKRT_ERROR_INVALID_GEOMETRY:
+    case VKRT_ERROR_EMPTY_SCENE:
+    case VKRT_ERROR_UNSUPPORTED: return EXIT_INPUT;
+    case VKRT_ERROR_NO_DEVICE:
+    case VKRT_ERROR_VULKAN:
+    case VKRT_ERROR_OUT_OF_DEVICE_MEMORY:
+    case VKRT_ERROR_LIMIT: return EXIT_DEVICE;
+    default: return EXIT_INTERNAL;
+    }
+}
+
+static int fail(vkrt_context *ctx, vkrt_result r, const char *what)
+{
+    const char *detail = ctx ? vkrt_context_last_error(ctx) : last_logged_error;
+    if (!detail || !detail[0]) detail = vkrt_result_string(r);
+    if (what) fprintf(stderr, "vkrt: error: %s: %s\n", what, detail);
+    else fprintf(stderr, "vkrt: error: %s\n", detail); /* the detail already names the file */
+    return exit_code_for(r);
+}
+
+static const char usage_text[] =
+    "usage: vkrt <command> [options]\n"
+    "\n"
+    "commands:\n"
+    "  render [FILE]   trace FILE (.obj, .gltf, .glb; the built-in scene when none) to an image\n"
+    "  info FILE       load FILE, build its BVH and print statistics\n"
+    "  devices         list the Vulkan devices\n"
+    "\n"
+    "render options (defaults first):\n"
+    "  -o, --output OUT          render.png; .png, .ppm (8-bit colour) or .pfm (raw floats)\n"
+    "  --mode normal|depth|heatmap|id\n"
+    "  --heat nodes|leaves|tris  what heatmap counts per ray\n"
+    "  --heat-max N              count at the top of the heat ramp (default: the image maximum)\n"
+    "  --backend gpu|cpu         Vulkan compute, or the C reference tracer\n"
+    "  --bvh sah|midpoint        BVH builder\n"
+    "  --max-leaf N              largest SAH leaf (4)\n"
+    "  --traverse bvh|naive      naive tests every triangle (identical image, slow)\n"
+    "  --eye X,Y,Z               0,0,1.5\n"
+    "  --target X,Y,Z            0,0,0\n"
+    "  --up X,Y,Z                0,1,0\n"
+    "  --fov DEG                 45 (vertical)\n"
+    "  --size WxH                1024x1024\n"
+    "  --no-normalize            keep world coordinates (default: scene scaled into [-0.5,0.5]^3)\n"
+    "  --device N                Vulkan device N as listed by `vkrt devices` (default: the best)\n"
+    "  --threads N               CPU backend threads (default: one per core)\n"
+    "  --validation              enable the Vulkan validation layer; any message fails the run\n"
+    "  --repeat N                render once to warm up (shader compilation), then N times, and\n"
+    "                            report the median times\n"
+    "  -q, --quiet / -v, --verbose\n"
+    "\n"
+    "examples:\n"
+    "  vkrt render                                   built-in scene -> render.png\n"
+    "  vkrt render bunny.obj -o bunny.png --size 512x512\n"
+    "  vkrt render dragon.glb --mode heatmap --heat leaves --bvh midpoint -o heat.png\n"
+    "  vkrt render bunny.obj --mode id -o ids.pfm --backend cpu\n"
+    "  vkrt info dragon.glb --bvh sah\n"
+    "\n"
+    "exit codes: 0 success, 1 internal error, 2 usage, 3 bad input file, 4 device (Vulkan) error,\n"
+    "            5 validation-layer messages (with --validation)\n"
+    "environment: VKRT_PIPELINE_CACHE (pipeline cache file; default ~/.cache/vkrt/pipelines.bin),\n"
+    "             VKRT_VALIDATION=1 (same as --validation)\n";
+
+typedef struct options {
+    const char *command;
+    const char *input;
+    const char *output;
+    vkrt_context_desc context;
+    vkrt_scene_desc scene;
+    vkrt_render_desc render;
+    float heat_max;
+    uint32_t repeat; /* timed renders after one warm-up; 0: a single render */
+} options;
+
+static bool parse_vec3(const char *s, float v[3])
+{
+    char *end;
+    for (int i = 0; i < 3; i++) {
+        errno = 0;
+        double x = strtod(s, &end);
+        if (end == s || errno || !isfinite(x)) return false;
+        v[i] = (float)x;
+        if (i < 2) {
+            if (*end != ',') return false;
+            s = end + 1;
+        }
+    }
+    return *end == '\0';
+}
+
+static bool parse_u32(const char *s, uint32_t *out)
+{
+    char *end;
+    errno = 0;
+    unsigned long v = strtoul(s, &end, 10);
+    if (end == s || *end || errno || v > UINT32_MAX || s[0] == '-') return false;
+    *out = (uint32_t)v;
+    return true;
+}
+
+static bool parse_float(const char *s, float *out)
+{
+    char *end;
+    errno = 0;
+    double v = strtod(s, &end);
+    if (end == s || *end || errno || !isfinite(v)) return false;
+    *out = (float)v;
+    return true;
+}
+
+static bool parse_size(const char *s, uint32_t *w, uint32_t *h)
+{
+    char buf[64];
+    const char *x = strchr(s, 'x');
+    if (!x || (size_t)(x - s) >= sizeof buf) return false;
+    memcpy(buf, s, (size_t)(x - s));
+    buf[x - s] = '\0';
+    return parse_u32(buf, w) && parse_u32(x + 1, h) && *w > 0 && *h > 0;
+}
+
+static int usage_error(const char *fmt, const char *arg)
+{
+    fprintf(stderr, "vkrt: ");
+    fprintf(stderr, fmt, arg);
+    fprintf(stderr, "\n(run `vkrt --help` for usage)\n");
+    return EXIT_USAGE;
+}
+
+#define NEED_VALUE()                                                                   \
+    do {                                                                               \
+        if (i + 1 >= argc) return usage_error("option %s needs a value", arg);         \
+        value = argv[++i];                                                             \
+    } while (0)
+
+static int parse_args(int argc, char **argv, options *o)
+{
+    for (int i = 2; i < argc; i++) {
+        const char *arg = argv[i], *value = NULL;
+        if (!strcmp(arg, "-o") || !strcmp(arg, "--output")) {
+            NEED_VALUE();
+            o->output = value;
+        } else if (!strcmp(arg, "--mode")) {
+            NEED_VALUE();
+            if (!strcmp(value, "normal")) o->render.mode = VKRT_MODE_NORMAL;
+            else if (!strcmp(value, "depth")) o->render.mode = VKRT_MODE_DEPTH;
+            else if (!strcmp(value, "heatmap")) o->render.mode = VKRT_MODE_HEATMAP;
+            else if (!strcmp(value, "id")) o->render.mode = VKRT_MODE_ID;
+            else return usage_error("unknown mode '%s' (normal, depth, heatmap, id)", value);
+        } else if (!strcmp(arg, "--heat")) {
+            NEED_VALUE();
+            if (!strcmp(value, "nodes")) o->render.heat = VKRT_HEAT_NODES;
+            else if (!strcmp(value, "leaves")) o->render.heat = VKRT_HEAT_LEAVES;
+            else if (!strcmp(value, "tris")) o->render.heat = VKRT_HEAT_TRIS;
+            else return usage_error("unknown heat kind '%s' (nodes, leaves, tris)", value);
+        } else if (!strcmp(arg, "--heat-max")) {
+            NEED_VALUE();
+            if (!parse_float(value, &o->heat_max) || o->heat_max <= 0) return usage_error("bad --heat-max '%s'", value);
+        } else if (!strcmp(arg, "--backend")) {
+            NEED_VALUE();
+            if (!strcmp(value, "gpu")) o->context.backend = VKRT_BACKEND_GPU;
+            else if (!strcmp(value, "cpu")) o->context.backend = VKRT_BACKEND_CPU;
+            else return usage_error("unknown backend '%s' (gpu, cpu)", value);
+        } else if (!strcmp(arg, "--bvh")) {
+            NEED_VALUE();
+            if (!strcmp(value, "sah")) o->scene.builder = VKRT_BVH_BUILDER_BINNED_SAH;
+            else if (!strcmp(value, "midpoint")) o->scene.builder = VKRT_BVH_BUILDER_MIDPOINT;
+            else return usage_error("unknown BVH builder '%s' (sah, midpoint)", value);
+        } else if (!strcmp(arg, "--max-leaf")) {
+            NEED_VALUE();
+            if (!parse_u32(value, &o->scene.max_leaf_size) || !o->scene.max_leaf_size)
+                return usage_error("bad --max-leaf '%s'", value);
+        } else if (!strcmp(arg, "--traverse")) {
+            NEED_VALUE();
+            if (!strcmp(value, "bvh")) o->render.traversal = VKRT_TRAVERSAL_BVH;
+            else if (!strcmp(value, "naive")) o->render.traversal = VKRT_TRAVERSAL_NAIVE;
+            else return usage_error("unknown traversal '%s' (bvh, naive)", value);
+        } else if (!strcmp(arg, "--eye")) {
+            NEED_VALUE();
+            if (!parse_vec3(value, o->render.camera.eye)) return usage_error("bad --eye '%s' (want X,Y,Z)", value);
+        } else if (!strcmp(arg, "--target")) {
+            NEED_VALUE();
+            if (!parse_vec3(value, o->render.camera.target)) return usage_error("bad --target '%s' (want X,Y,Z)", value);
+        } else if (!strcmp(arg, "--up")) {
+            NEED_VALUE();
+            if (!parse_vec3(value, o->render.camera.up)) return usage_error("bad --up '%s' (want X,Y,Z)", value);
+        } else if (!strcmp(arg, "--fov")) {
+            NEED_VALUE();
+            if (!parse_float(value, &o->render.camera.fov_y_degrees) || o->render.camera.fov_y_degrees <= 0 ||
+                o->render.camera.fov_y_degrees >= 180)
+                return usage_error("bad --fov '%s' (degrees, between 0 and 180)", value);
+        } else if (!strcmp(arg, "--size")) {
+            NEED_VALUE();
+            if (!parse_size(value, &o->render.width, &o->render.height)) return usage_error("bad --size '%s' (want WxH)", value);
+        } else if (!strcmp(arg, "--no-normalize")) {
+            o->scene.keep_world_coordinates = true;
+        } else if (!strcmp(arg, "--device")) {
+            NEED_VALUE();
+            if (!parse_u32(value, &o->context.device_index)) return usage_error("bad --device '%s'", value);
+            o->context.select_device = true;
+        } else if (!strcmp(arg, "--threads")) {
+            NEED_VALUE();
+            if (!parse_u32(value, &o->context.cpu_threads) || !o->context.cpu_threads) return usage_error("bad --threads '%s'", value);
+        } else if (!strcmp(arg, "--repeat")) {
+            NEED_VALUE();
+            if (!parse_u32(value, &o->repeat) || !o->repeat || o->repeat > 1000) return usage_error("bad --repeat '%s'", value);
+        } else if (!strcmp(arg, "--validation")) {
+            o->context.validation = true;
+        } else if (!strcmp(arg, "-q") || !strcmp(arg, "--quiet")) {
+            verbosity = 0;
+        } else if (!strcmp(arg, "-v") || !strcmp(arg, "--verbose")) {
+            verbosity = 2;
+        } else if (!strcmp(arg, "-h") || !strcmp(arg, "--help")) {
+            fputs(usage_text, stdout);
+            exit(EXIT_OK);
+        } else if (arg[0] == '-' && arg[1]) {
+            return usage_error("unknown option '%s'", arg);
+        } else if (!o->input) {
+            o->input = arg;
+        } else {
+            return usage_error("unexpected argument '%s' (one input file at most)", arg);
+        }
+    }
+    return EXIT_OK;
+}
+
+/* The pipeline cache spares lavapipe's LLVM from recompiling every pipeline in every run. */
+static const char *pipeline_cache_path(char *buf, size_t size)
+{
+    const char *env = getenv("VKRT_PIPELINE_CACHE");
+    if (env) return env[0] ? env : NULL;
+    const char *base = getenv("XDG_CACHE_HOME");
+    const char *home = getenv("HOME");
+    char dir[4096];
+    if (base && base[0]) snprintf(dir, sizeof dir, "%s/vkrt", base);
+    else if (home && home[0]) snprintf(dir, sizeof dir, "%s/.cache/vkrt", home);
+    else return NULL;
+    char parent[4096];
+    snprintf(parent, sizeof parent, "%s", dir);
+    char *slash = strrchr(parent, '/');
+    if (slash) *slash = '\0';
+    mkdir(parent, 0755);
+    if (mkdir(dir, 0755) != 0 && errno != EEXIST) return NULL;
+    snprintf(buf, size, "%s/pipelines.bin", dir);
+    return buf;
+}
+
+static int check_validation(vkrt_context *ctx, const options *o)
+{
+    uint32_t n = vkrt_context_validation_messages(ctx);
+    if (o->context.validation && n) {
+        fprintf(stderr, "vkrt: error: the Vulkan validation layer reported %u message%s\n", n, n == 1 ? "" : "s");
+        return EXIT_VALIDATION;
+    }
+    return EXIT_OK;
+}
+
+static const char *mode_name(vkrt_mode m)
+{
+    static const char *names[] = { "normal", "normal", "depth", "heatmap", "id" };
+    return names[m];
+}
+
+static int compare_doubles(const void *a, const void *b)
+{
+    double x = *(const double *)a, y = *(const double *)b;
+    return (x > y) - (x < y);
+}
+
+static double median(double *v, uint32_t n)
+{
+    qsort(v, n, sizeof *v, compare_doubles);
+    return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+
+static bool known_image_extension(const char *path)
+{
+    const char *dot = strrchr(path, '.');
+    return dot && !strchr(dot, '/') &&
+           (!strcasecmp(dot, ".png") || !strcasecmp(dot, ".ppm") || !strcasecmp(dot, ".pfm"));
+}
+
+static int command_render(options *o)
+{
+    /* Refuse an unknown format before spending a render on it. */
+    if (!known_image_extension(o->output))
+        return usage_error("cannot tell the image format of '%s' (use .png, .ppm or .pfm)", o->output);
+    char cache_buf[4200];
+    o->context.pipeline_cache_path = pipeline_cache_path(cache_buf, sizeof cache_buf);
+    vkrt_context *ctx = NULL;
+    vkrt_result r = vkrt_context_create(&o->context, &ctx);
+    if (r != VKRT_OK)
+        return fail(NULL, r, o->context.backend == VKRT_BACKEND_CPU ? "creating the CPU backend" : "creating the Vulkan backend");
+    int code = EXIT_OK;
+    vkrt_scene *scene = NULL;
+    float *rgba = NULL;
+    o->scene.path = o->input;
+    r = vkrt_scene_create(ctx, &o->scene, &scene);
+    if (r != VKRT_OK) {
+        code = fail(ctx, r, o->input ? NULL : "built-in scene");
+        goto done;
+    }
+    uint32_t w = o->render.width ? o->render.width : 1024, h = o->render.height ? o->render.height : 1024;
+    size_t floats = vkrt_render_floats(w, h);
+    rgba = floats ? malloc(floats * sizeof *rgba) : NULL;
+    if (!rgba) {
+        fprintf(stderr, "vkrt: error: out of memory for a %ux%u image\n", w, h);
+        code = EXIT_INTERNAL;
+        goto done;
+    }
+    vkrt_render_stats stats;
+    double trace_ms[1001], total_ms[1001];
+    uint32_t runs = o->repeat ? o->repeat + 1 : 1;
+    for (uint32_t i = 0; i < runs; i++) {
+        r = vkrt_render(ctx, scene, &o->render, rgba, floats, &stats);
+        if (r != VKRT_OK) {
+            code = fail(ctx, r, "render");
+            goto done;
+        }
+        trace_ms[i] = stats.trace_ms;
+        total_ms[i] = stats.total_ms;
+    }
+    if (o->repeat) { /* the first run is the warm-up */
+        stats.trace_ms = median(trace_ms + 1, o->repeat);
+        stats.total_ms = median(total_ms + 1, o->repeat);
+    }
+    /* Validation findings fail the run before anything is written. */
+    if ((code = check_validation(ctx, o)) != EXIT_OK) goto done;
+    vkrt_image_view view = { rgba, w, h, o->render.mode, o->heat_max };
+    r = vkrt_image_save(ctx, o->output, &view);
+    if (r != VKRT_OK) {
+        code = fail(ctx, r, "saving the image");
+        goto done;
+    }
+    if (verbosity >= 1) {
+        vkrt_scene_stats ss;
+        vkrt_scene_stats_get(scene, &ss);
+        fprintf(stderr, "vkrt: %s, %" PRIu64 " triangles, %ux%u %s on %s: trace %.1f ms, total %.1f ms%s -> %s\n",
+                o->input ? o->input : "built-in scene", ss.triangles, w, h, mode_name(o->render.mode),
+                vkrt_context_device_name(ctx), stats.trace_ms, stats.total_ms,
+                o->repeat ? " (median after a warm-up)" : "", o->output);
+    }
+done:
+    free(rgba);
+    vkrt_scene_destroy(scene);
+    int vcode = check_validation(ctx, o);
+    vkrt_context_destroy(ctx);
+    return code != EXIT_OK ? code : vcode;
+}
+
+static int command_info(options *o)
+{
+    if (!o->input) return usage_error("%s", "info needs a FILE");
+    vkrt_context *ctx = NULL;
+    o->context.backend = VKRT_BACKEND_CPU; /* statistics need no device */
+    vkrt_result r = vkrt_context_create(&o->context, &ctx);
+    if (r != VKRT_OK) return fail(NULL, r, "creating the context");
+    vkrt_scene *scene = NULL;
+    o->scene.path = o->input;
+    r = vkrt_scene_create(ctx, &o->scene, &scene);
+    if (r != VKRT_OK) {
+        int code = fail(ctx, r, NULL);
+        vkrt_context_destroy(ctx);
+        return code;
+    }
+    vkrt_scene_stats s;
+    vkrt_scene_stats_get(scene, &s);
+    printf("file          %s\n", o->input);
+    printf("builder       %s\n", o->scene.builder == VKRT_BVH_BUILDER_MIDPOINT ? "midpoint" : "sah");
+    printf("triangles     %" PRIu64 "\n", s.triangles);
+    printf("nodes         %" PRIu64 "\n", s.nodes);
+    printf("leaves        %" PRIu64 "\n", s.leaves);
+    printf("depth         %u\n", s.depth);
+    printf("sah cost      %.3f (C_trav = C_isect = 1)\n", s.sah_cost);
+    printf("load          %.1f ms\n", s.load_ms);
+    printf("build         %.1f ms\n", s.build_ms);
+    printf("bytes         %" PRIu64 " (nodes %" PRIu64 ", triangles %" PRIu64 "; %.1f per triangle)\n",
+           s.node_bytes + s.triangle_bytes, s.node_bytes, s.triangle_bytes,
+           s.triangles ? (double)(s.node_bytes + s.triangle_bytes) / (double)s.triangles : 0.0);
+    printf("bounds        (%g, %g, %g) - (%g, %g, %g)\n", s.bounds_min[0], s.bounds_min[1], s.bounds_min[2],
+           s.bounds_max[0], s.bounds_max[1], s.bounds_max[2]);
+    printf("leaf sizes   ");
+    for (int i = 0; i < VKRT_LEAF_HISTOGRAM_BINS; i++)
+        if (s.leaf_histogram[i])
+            printf(" %s%d:%" PRIu64, i == VKRT_LEAF_HISTOGRAM_BINS - 1 ? ">=" : "", i + 1, s.leaf_histogram[i]);
+    printf("\n");
+    vkrt_scene_destroy(scene);
+    vkrt_context_destroy(ctx);
+    return EXIT_OK;
+}
+
+static const char *device_type_name(vkrt_device_type t)
+{
+    switch (t) {
+    case VKRT_DEVICE_INTEGRATED_GPU: return "integrated GPU";
+    case VKRT_DEVICE_DISCRETE_GPU: return "discrete GPU";
+    case VKRT_DEVICE_VIRTUAL_GPU: return "virtual GPU";
+    case VKRT_DEVICE_CPU: return "CPU";
+    default: return "other";
+    }
+}
+
+static int command_devices(options *o)
+{
+    vkrt_device_info devices[16];
+    uint32_t count = 16;
+    vkrt_result r = vkrt_devices_list(&o->context, devices, &count);
+    if (r != VKRT_OK) return fail(NULL, r, "listing Vulkan devices");
+    for (uint32_t i = 0; i < count; i++) {
+        const vkrt_device_info *d = &devices[i];
+        printf("%u: %s (%s, Vulkan %u.%u.%u, storage buffers up to %" PRIu64 " MiB)%s\n", i, d->name,
+               device_type_name(d->type), d->api_version >> 22, (d->api_version >> 12) & 0x3ff,
+               d->api_version & 0xfff, d->max_storage_buffer_range >> 20, d->usable ? "" : " [unusable]");
+    }
+    return EXIT_OK;
+}
+
+int main(int argc, char **argv)
+{
+    if (argc < 2 || !strcmp(argv[1], "-h") || !strcmp(argv[1], "--help") || !strcmp(argv[1], "help")) {
+        fputs(usage_text, argc < 2 ? stderr : stdout);
+        return argc < 2 ? EXIT_USAGE : EXIT_OK;
+    }
+    if (!strcmp(argv[1], "--version")) {
+        uint32_t v = vkrt_version();
+        printf("vkrt %u.%u.%u\n", v >> 22, (v >> 12) & 0x3ff, v & 0xfff);
+        return EXIT_OK;
+    }
+    options o = { .command = argv[1], .output = "render.png" };
+    o.context.log = on_log;
+    const char *env_validation = getenv("VKRT_VALIDATION");
+    if (env_validation && env_validation[0] == '1') o.context.validation = true;
+    int code = parse_args(argc, argv, &o);
+    if (code != EXIT_OK) return code;
+    if (!strcmp(o.command, "render")) return command_render(&o);
+    if (!strcmp(o.command, "info")) return command_info(&o);
+    if (!strcmp(o.command, "devices")) return command_devices(&o);
+    return usage_error("unknown command '%s' (render, info, devices)", o.command);
+}

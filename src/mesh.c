@@ -1,0 +1,325 @@
+/* The triangle soup every loader fills: validation, world transform, vertex normals, bounds,
+ * normalisation and the choice of loader for a file.
+ *
+ * Missing vertex normals are angle-weighted averages of the adjacent face normals, after
+ * Thürmer and Wüthrich, "Computing vertex normals from polygonal facets" (JGT 3(1), 1998):
+ * unlike area weighting, the result does not change when a face is split into thinner
+ * triangles. */
+#include "mesh.h"
+
+#include <errno.h>
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+
+/* Room for `needed` triangles in both corner arrays, which share one capacity. */
+static int reserve(core *c, mesh *m, size_t needed)
+{
+    if (needed <= m->tri_capacity) return 0;
+    size_t cap = m->tri_capacity ? m->tri_capacity : 64;
+    while (cap < needed) {
+        if (cap > SIZE_MAX / 2) return -1;
+        cap *= 2;
+    }
+    float *positions = core_alloc_array(c, cap, 9 * sizeof(float));
+    float *normals = core_alloc_array(c, cap, 9 * sizeof(float));
+    if (!positions || !normals) {
+        core_free(c, positions);
+        core_free(c, normals);
+        return -1;
+    }
+    if (m->tri_count) {
+        memcpy(positions, m->positions, (size_t)m->tri_count * 9 * sizeof(float));
+        memcpy(normals, m->normals, (size_t)m->tri_count * 9 * sizeof(float));
+    }
+    core_free(c, m->positions);
+    core_free(c, m->normals);
+    m->positions = positions;
+    m->normals = normals;
+    m->tri_capacity = cap;
+    return 0;
+}
+
+static bool finite3(const float *v)
+{
+    return isfinite(v[0]) && isfinite(v[1]) && isfinite(v[2]);
+}
+
+static const float *first_non_finite(const float *v)
+{
+    for (int i = 0; i < 3; i++)
+        if (!isfinite(v[i])) return &v[i];
+    return NULL;
+}
+
+static void cross(const double a[3], const double b[3], double out[3])
+{
+    out[0] = a[1] * b[2] - a[2] * b[1];
+    out[1] = a[2] * b[0] - a[0] * b[2];
+    out[2] = a[0] * b[1] - a[1] * b[0];
+}
+
+static double dot(const double a[3], const double b[3])
+{
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+}
+
+/* Scales v to unit length in place; false (v untouched) when that is impossible. */
+static bool normalize3(double v[3])
+{
+    double len = sqrt(dot(v, v));
+    if (!(len > 0.0) || !isfinite(len)) return false;
+    v[0] /= len;
+    v[1] /= len;
+    v[2] /= len;
+    return true;
+}
+
+/* The unit normal of triangle (a, b, c) counter-clockwise, flipped by `sign`; (0, 0, 1) when
+ * the triangle has no area. */
+static void face_normal(const float *a, const float *b, const float *c, double sign, double out[3])
+{
+    double e1[3] = { (double)b[0] - a[0], (double)b[1] - a[1], (double)b[2] - a[2] };
+    double e2[3] = { (double)c[0] - a[0], (double)c[1] - a[1], (double)c[2] - a[2] };
+    cross(e1, e2, out);
+    out[0] *= sign;
+    out[1] *= sign;
+    out[2] *= sign;
+    if (!normalize3(out)) {
+        out[0] = 0.0;
+        out[1] = 0.0;
+        out[2] = 1.0;
+    }
+}
+
+/* Angle at corner p between the edges to q and r, in [0, pi]; atan2 stays accurate for the
+ * near-0 and near-pi angles of slivers where acos of a dot product does not. */
+static double corner_angle(const float *p, const float *q, const float *r)
+{
+    double u[3] = { (double)q[0] - p[0], (double)q[1] - p[1], (double)q[2] - p[2] };
+    double v[3] = { (double)r[0] - p[0], (double)r[1] - p[1], (double)r[2] - p[2] };
+    double n[3];
+    cross(u, v, n);
+    return atan2(sqrt(dot(n, n)), dot(u, v));
+}
+
+static void transform_point(const float *t, const float *p, float *out)
+{
+    for (int i = 0; i < 3; i++)
+        out[i] = (float)((double)t[i] * p[0] + (double)t[4 + i] * p[1] + (double)t[8 + i] * p[2] +
+                         (double)t[12 + i]);
+}
+
+vkrt_result mesh_append_indexed(core *c, mesh *m, const mesh_primitive *p, const char *source,
+                                const char *what)
+{
+    if (!p || (p->vertex_count && !p->positions))
+        return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "%s: %s: primitive without positions", source, what);
+    size_t index_count = p->indices ? p->index_count : p->vertex_count;
+    if (index_count % 3)
+        return core_fail(c, VKRT_ERROR_INVALID_GEOMETRY, "%s: %s: %zu %s is not a multiple of 3", source, what,
+                         index_count, p->indices ? "indices" : "vertices");
+    size_t tris = index_count / 3;
+    if (tris == 0) return VKRT_OK;
+    if (tris > UINT32_MAX - (size_t)m->tri_count)
+        return core_fail(c, VKRT_ERROR_LIMIT, "%s: %s: more than %u triangles in all", source, what, UINT32_MAX);
+
+    const size_t nv = p->vertex_count;
+    for (size_t v = 0; v < nv; v++) {
+        const float *bad = first_non_finite(p->positions + 3 * v);
+        if (bad)
+            return core_fail(c, VKRT_ERROR_INVALID_GEOMETRY, "%s: %s: vertex %zu has a non-finite coordinate (%g)",
+                             source, what, v, (double)*bad);
+        if (p->normals && (bad = first_non_finite(p->normals + 3 * v)))
+            return core_fail(c, VKRT_ERROR_INVALID_GEOMETRY, "%s: %s: the normal of vertex %zu is non-finite (%g)",
+                             source, what, v, (double)*bad);
+    }
+    if (p->indices) {
+        for (size_t i = 0; i < index_count; i++)
+            if (p->indices[i] >= nv)
+                return core_fail(c, VKRT_ERROR_INVALID_GEOMETRY,
+                                 "%s: %s: index %zu is %u, out of range for %zu vertices", source, what, i,
+                                 p->indices[i], nv);
+    }
+    if (p->transform) {
+        for (int i = 0; i < 16; i++)
+            if (!isfinite(p->transform[i]))
+                return core_fail(c, VKRT_ERROR_INVALID_GEOMETRY, "%s: %s: the transform has a non-finite element",
+                                 source, what);
+    }
+
+    vkrt_result r = VKRT_ERROR_OUT_OF_MEMORY;
+    float *world = NULL;
+    double *accum = NULL;
+    /* Without a transform the file's coordinates are used as they are, bit for bit. */
+    const float *pos = p->positions;
+    if (p->transform) {
+        world = core_alloc_array(c, nv, 3 * sizeof(float));
+        if (!world) goto oom;
+        for (size_t v = 0; v < nv; v++) {
+            transform_point(p->transform, p->positions + 3 * v, world + 3 * v);
+            if (!finite3(world + 3 * v)) {
+                r = core_fail(c, VKRT_ERROR_INVALID_GEOMETRY,
+                              "%s: %s: vertex %zu overflows to a non-finite coordinate after the transform", source,
+                              what, v);
+                goto done;
+            }
+        }
+        pos = world;
+    }
+
+    /* Normals go through the cofactor matrix, det(M) * inverse-transpose(M): the same direction
+     * as the inverse transpose once the sign of det is applied, and still defined for a
+     * singular M (a scale of 0 flattens the mesh, and its normals then all point along the
+     * flattened axis). A mirroring transform (det < 0) reverses the winding, so computed face
+     * normals are flipped to keep pointing out of the surface. */
+    double cof[9] = { 1, 0, 0, 0, 1, 0, 0, 0, 1 }; /* row-major: n' = cof * n */
+    double sign = 1.0;
+    if (p->transform) {
+        const float *t = p->transform;
+        double a[3][3]; /* a[row][col] */
+        for (int row = 0; row < 3; row++)
+            for (int col = 0; col < 3; col++) a[row][col] = t[col * 4 + row];
+        for (int row = 0; row < 3; row++) {
+            for (int col = 0; col < 3; col++) {
+                int r0 = (row + 1) % 3, r1 = (row + 2) % 3, c0 = (col + 1) % 3, c1 = (col + 2) % 3;
+                cof[row * 3 + col] = a[r0][c0] * a[r1][c1] - a[r0][c1] * a[r1][c0];
+            }
+        }
+        double det = a[0][0] * cof[0] + a[0][1] * cof[1] + a[0][2] * cof[2];
+        if (det < 0.0) {
+            sign = -1.0;
+            for (int i = 0; i < 9; i++) cof[i] = -cof[i];
+        }
+    }
+
+    if (!p->normals) {
+        accum = core_calloc_array(c, nv, 3 * sizeof(double));
+        if (!accum) goto oom;
+        for (size_t t = 0; t < tris; t++) {
+            uint32_t idx[3];
+            for (int k = 0; k < 3; k++) idx[k] = p->indices ? p->indices[3 * t + k] : (uint32_t)(3 * t + k);
+            const float *v0 = pos + 3 * (size_t)idx[0], *v1 = pos + 3 * (size_t)idx[1], *v2 = pos + 3 * (size_t)idx[2];
+            double e1[3] = { (double)v1[0] - v0[0], (double)v1[1] - v0[1], (double)v1[2] - v0[2] };
+            double e2[3] = { (double)v2[0] - v0[0], (double)v2[1] - v0[1], (double)v2[2] - v0[2] };
+            double n[3];
+            cross(e1, e2, n);
+            if (!normalize3(n)) continue; /* zero area: no direction to contribute */
+            double w[3] = { corner_angle(v0, v1, v2), corner_angle(v1, v2, v0), corner_angle(v2, v0, v1) };
+            for (int k = 0; k < 3; k++)
+                for (int j = 0; j < 3; j++) accum[3 * (size_t)idx[k] + j] += sign * w[k] * n[j];
+        }
+    }
+
+    if (reserve(c, m, (size_t)m->tri_count + tris) != 0) goto oom;
+    for (size_t t = 0; t < tris; t++) {
+        uint32_t idx[3];
+        for (int k = 0; k < 3; k++) idx[k] = p->indices ? p->indices[3 * t + k] : (uint32_t)(3 * t + k);
+        float *out_p = m->positions + ((size_t)m->tri_count + t) * 9;
+        float *out_n = m->normals + ((size_t)m->tri_count + t) * 9;
+        for (int k = 0; k < 3; k++) memcpy(out_p + 3 * k, pos + 3 * (size_t)idx[k], 3 * sizeof(float));
+        double fallback[3];
+        face_normal(out_p, out_p + 3, out_p + 6, sign, fallback);
+        for (int k = 0; k < 3; k++) {
+            double n[3];
+            if (p->normals) {
+                const float *src = p->normals + 3 * (size_t)idx[k];
+                for (int j = 0; j < 3; j++)
+                    n[j] = cof[j * 3 + 0] * src[0] + cof[j * 3 + 1] * src[1] + cof[j * 3 + 2] * src[2];
+            } else {
+                memcpy(n, accum + 3 * (size_t)idx[k], sizeof n);
+            }
+            if (!normalize3(n)) memcpy(n, fallback, sizeof n);
+            for (int j = 0; j < 3; j++) out_n[3 * k + j] = (float)n[j];
+        }
+    }
+    m->tri_count += (uint32_t)tris;
+    r = VKRT_OK;
+    goto done;
+oom:
+    r = core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "%s: %s: out of memory appending %zu triangles", source, what, tris);
+done:
+    core_free(c, world);
+    core_free(c, accum);
+    return r;
+}
+
+void mesh_update_bounds(mesh *m)
+{
+    if (m->tri_count == 0) {
+        memset(m->bounds_min, 0, sizeof m->bounds_min);
+        memset(m->bounds_max, 0, sizeof m->bounds_max);
+        return;
+    }
+    for (int j = 0; j < 3; j++) m->bounds_min[j] = m->bounds_max[j] = m->positions[j];
+    size_t corners = (size_t)m->tri_count * 3;
+    for (size_t i = 0; i < corners; i++) {
+        const float *v = m->positions + 3 * i;
+        for (int j = 0; j < 3; j++) {
+            if (v[j] < m->bounds_min[j]) m->bounds_min[j] = v[j];
+            if (v[j] > m->bounds_max[j]) m->bounds_max[j] = v[j];
+        }
+    }
+}
+
+void mesh_normalize(mesh *m)
+{
+    mesh_update_bounds(m);
+    if (m->tri_count == 0) return;
+    double centre[3], extent = 0.0;
+    for (int j = 0; j < 3; j++) {
+        centre[j] = 0.5 * ((double)m->bounds_min[j] + (double)m->bounds_max[j]);
+        double e = (double)m->bounds_max[j] - (double)m->bounds_min[j];
+        if (e > extent) extent = e;
+    }
+    double scale = extent > 0.0 ? 1.0 / extent : 1.0;
+    size_t corners = (size_t)m->tri_count * 3;
+    for (size_t i = 0; i < corners; i++) {
+        float *v = m->positions + 3 * i;
+        for (int j = 0; j < 3; j++) v[j] = (float)(((double)v[j] - centre[j]) * scale);
+    }
+    /* A uniform scale and a translation leave unit normals as they are. */
+    mesh_update_bounds(m);
+}
+
+void mesh_destroy(core *c, mesh *m)
+{
+    if (!m) return;
+    core_free(c, m->positions);
+    core_free(c, m->normals);
+    memset(m, 0, sizeof *m);
+}
+
+/* True when the part of path after its last '/' ends in ext, ignoring case. */
+static bool has_extension(const char *path, const char *ext)
+{
+    const char *slash = strrchr(path, '/');
+    const char *name = slash ? slash + 1 : path;
+    size_t n = strlen(name), e = strlen(ext);
+    if (n <= e) return false;
+    const char *tail = name + n - e;
+    for (size_t i = 0; i < e; i++) {
+        char ch = tail[i];
+        if (ch >= 'A' && ch <= 'Z') ch = (char)(ch - 'A' + 'a');
+        if (ch != ext[i]) return false;
+    }
+    return true;
+}
+
+vkrt_result mesh_load(core *c, const char *path, mesh *m)
+{
+    memset(m, 0, sizeof *m);
+    if (!path) return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "mesh path is NULL");
+    /* The content decides first: a GLB renamed .obj or without extension still loads. */
+    FILE *f = fopen(path, "rb");
+    if (!f) return core_fail(c, VKRT_ERROR_IO, "%s: cannot open: %s", path, strerror(errno));
+    unsigned char magic[4] = { 0 };
+    size_t got = fread(magic, 1, sizeof magic, f);
+    int read_errno = ferror(f) ? errno : 0;
+    fclose(f);
+    if (read_errno) return core_fail(c, VKRT_ERROR_IO, "%s: cannot read: %s", path, strerror(read_errno));
+    if (got == 4 && memcmp(magic, "glTF", 4) == 0) return mesh_load_gltf(c, path, m);
+    if (has_extension(path, ".gltf") || has_extension(path, ".glb")) return mesh_load_gltf(c, path, m);
+    if (has_extension(path, ".obj")) return mesh_load_obj(c, path, m);
+    return core_fail(c, VKRT_ERROR_UNSUPPORTED, "%s: unknown mesh format (expected .obj, .gltf or .glb)", path);
+}

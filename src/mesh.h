@@ -1,0 +1,59 @@
+/* A triangle soup in load order: what every loader produces and every BVH builder consumes.
+ *
+ * Triangle i is the i-th triangle of the file after triangulation (faces fanned from their
+ * first corner, glTF primitives in mesh order, meshes instanced once per node of the default
+ * scene, in depth-first node order). `id` mode reports this index. */
+#ifndef VKRT_MESH_H
+#define VKRT_MESH_H
+
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+
+#include "core.h"
+
+typedef struct mesh {
+    uint32_t tri_count;
+    size_t tri_capacity;
+    float *positions;        /* 9 floats per triangle: corners v0, v1, v2 */
+    float *normals;          /* 9 floats per triangle: unit vertex normal at each corner */
+    float bounds_min[3];     /* of all corners; valid when tri_count > 0 */
+    float bounds_max[3];
+} mesh;
+
+/* One indexed primitive handed to mesh_append_indexed(). */
+typedef struct mesh_primitive {
+    const float *positions;  /* 3 floats per vertex */
+    size_t vertex_count;
+    const uint32_t *indices; /* 3 per triangle; NULL: vertices taken in order (non-indexed) */
+    size_t index_count;      /* multiple of 3 (ignored when indices is NULL) */
+    const float *normals;    /* 3 floats per vertex, or NULL: computed, angle-weighted */
+    const float *transform;  /* column-major 4x4 applied to positions (normals by its inverse
+                                transpose), or NULL for identity */
+} mesh_primitive;
+
+/* Appends a primitive's triangles. Checks every coordinate is finite and every index is below
+ * vertex_count; `source` (the file name) and `what` (e.g. "mesh 2 primitive 0") name the
+ * culprit in the failure message: VKRT_ERROR_INVALID_GEOMETRY or VKRT_ERROR_OUT_OF_MEMORY. */
+vkrt_result mesh_append_indexed(core *c, mesh *m, const mesh_primitive *primitive,
+                                const char *source, const char *what);
+
+/* Loads .obj (tinyobjloader), .gltf or .glb (cgltf), chosen by content and extension. On
+ * failure *m is left empty and the message names `path` and the problem. A file that parses
+ * but holds no triangles is VKRT_ERROR_EMPTY_SCENE. */
+vkrt_result mesh_load(core *c, const char *path, mesh *m);
+vkrt_result mesh_load_obj(core *c, const char *path, mesh *m);
+vkrt_result mesh_load_gltf(core *c, const char *path, mesh *m);
+
+/* The built-in scene: a subdivided icosphere, a torus and a box on a ground plane. */
+vkrt_result mesh_make_builtin(core *c, mesh *m);
+
+/* Recomputes bounds_min/max from the corners. */
+void mesh_update_bounds(mesh *m);
+/* Moves the bounding-box centre to the origin and scales the largest extent to 1, so the
+ * scene fits [-0.5, 0.5]^3. A scene of zero extent is only centred. */
+void mesh_normalize(mesh *m);
+
+void mesh_destroy(core *c, mesh *m);
+
+#endif

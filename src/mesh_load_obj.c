@@ -1,0 +1,469 @@
+/* Wavefront OBJ through tinyobjloader's callback parser (third_party/tinyobj_shim.h).
+ *
+ * The file is read whole, screened for what tinyobjloader accepts silently (binary bytes, and
+ * "nan"/"inf" coordinates, which it turns into 0), then parsed statement by statement. Faces
+ * are fanned from their first corner as they arrive, so triangles stay in file order; each
+ * `o`/`g` starts a new primitive for mesh_append_indexed(), which smooths computed normals
+ * only within it. Index checks wait for the end of the file, because an OBJ face may name a
+ * vertex defined further down. */
+#include "mesh.h"
+
+#include <errno.h>
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "tinyobj_shim.h"
+
+typedef struct obj_tri {
+    int64_t v[3];  /* 0-based position indices, range-checked after parsing */
+    int64_t vn[3]; /* 0-based normal indices, or -1 where the face has no complete set */
+    size_t face;   /* 1-based `f` statement it came from */
+} obj_tri;
+
+typedef struct obj_state {
+    core *c;
+    const char *path;
+    const char *text;
+    size_t size;
+    vkrt_result error; /* first failure inside a callback; later statements are ignored */
+    float *positions;
+    size_t position_count, position_capacity;
+    float *normals;
+    size_t normal_count, normal_capacity;
+    obj_tri *tris;
+    size_t tri_count, tri_capacity;
+    size_t *object_starts; /* first triangle of each `o`/`g` run */
+    size_t object_count, object_capacity;
+    size_t face_count, short_faces;
+} obj_state;
+
+typedef struct obj_scan {
+    size_t vertices, lines, points, statements, unknown;
+} obj_scan;
+
+static bool is_blank(char ch)
+{
+    return ch == ' ' || ch == '\t';
+}
+
+/* End of the line starting at i: the index of its '\r' or '\n' (or size). Line breaks are
+ * "\n", "\r\n" and a lone "\r", as tinyobjloader's safeGetline reads them. */
+static size_t line_end(const char *text, size_t size, size_t i)
+{
+    while (i < size && text[i] != '\n' && text[i] != '\r') i++;
+    return i;
+}
+
+static size_t next_line(const char *text, size_t size, size_t end)
+{
+    if (end < size && text[end] == '\r' && end + 1 < size && text[end + 1] == '\n') return end + 2;
+    return end < size ? end + 1 : size;
+}
+
+static bool keyword(const char *s, size_t n, const char *word)
+{
+    size_t w = strlen(word);
+    /* tinyobjloader wants a blank after the keyword, so a bare "v" is no statement. */
+    return n > w && memcmp(s, word, w) == 0 && is_blank(s[w]);
+}
+
+/* 1-based line number of the k-th (1-based) statement starting with word; 0 if none. Only
+ * used to word error messages, so the extra pass costs nothing on the success path. */
+static size_t statement_line(const char *text, size_t size, const char *word, size_t k)
+{
+    size_t line = 0, seen = 0;
+    for (size_t i = 0; i < size;) {
+        size_t end = line_end(text, size, i);
+        line++;
+        size_t s = i;
+        while (s < end && is_blank(text[s])) s++;
+        if (keyword(text + s, end - s, word) && ++seen == k) return line;
+        i = next_line(text, size, end);
+    }
+    return 0;
+}
+
+static bool word_ci(const char *s, size_t n, const char *word)
+{
+    size_t w = strlen(word);
+    if (n < w) return false;
+    for (size_t i = 0; i < w; i++) {
+        char ch = s[i];
+        if (ch >= 'A' && ch <= 'Z') ch = (char)(ch - 'A' + 'a');
+        if (ch != word[i]) return false;
+    }
+    return true;
+}
+
+/* Rejects what tinyobjloader would accept silently and counts what it ignores silently. */
+static vkrt_result scan_text(core *c, const char *path, const char *text, size_t size, obj_scan *out)
+{
+    memset(out, 0, sizeof *out);
+    for (size_t i = 0; i < size; i++) {
+        unsigned char ch = (unsigned char)text[i];
+        /* Text never holds control characters other than whitespace (and DOS's end-of-file
+         * mark); tinyobjloader would read a binary file as a run of unknown statements. */
+        if (ch < 0x20 && ch != '\t' && ch != '\n' && ch != '\r' && ch != '\v' && ch != '\f' && ch != 0x1a)
+            return core_fail(c, VKRT_ERROR_PARSE, "%s: not an OBJ file: binary byte 0x%02x at offset %zu", path, ch,
+                             i);
+    }
+    static const char *const known[] = { "v", "vn", "vt", "vp", "vw", "f", "l", "p", "o", "g", "s", "t",
+                                         "usemtl", "mtllib", "cstype", "deg", "curv", "curv2", "surf",
+                                         "parm", "trim", "hole", "end", "bmat", "step", "mg", "lod" };
+    size_t line = 0, normals = 0;
+    for (size_t i = 0; i < size;) {
+        size_t end = line_end(text, size, i);
+        line++;
+        size_t s = i;
+        while (s < end && is_blank(text[s])) s++;
+        const char *st = text + s;
+        size_t n = end - s;
+        i = next_line(text, size, end);
+        if (n == 0 || st[0] == '#') continue;
+        bool recognised = false;
+        for (size_t k = 0; k < sizeof known / sizeof known[0]; k++)
+            if (keyword(st, n, known[k])) recognised = true;
+        if (!recognised) {
+            out->unknown++;
+            continue;
+        }
+        out->statements++;
+        if (keyword(st, n, "l")) out->lines++;
+        if (keyword(st, n, "p")) out->points++;
+        bool vertex = keyword(st, n, "v"), normal = keyword(st, n, "vn");
+        if (!vertex && !normal) continue;
+        size_t number = vertex ? ++out->vertices : ++normals;
+        /* tinyobjloader parses "nan" and "inf" as 0, so they are caught here. */
+        size_t t = vertex ? 1 : 2;
+        for (int component = 0; component < 3; component++) {
+            while (t < n && is_blank(st[t])) t++;
+            if (t >= n || st[t] == '#') break;
+            size_t tok = t;
+            while (t < n && !is_blank(st[t])) t++;
+            size_t w = tok < n && (st[tok] == '+' || st[tok] == '-') ? tok + 1 : tok;
+            if (word_ci(st + w, t - w, "nan") || word_ci(st + w, t - w, "inf"))
+                return core_fail(c, VKRT_ERROR_INVALID_GEOMETRY, "%s: line %zu: %s %zu has a non-finite coordinate (%.*s)",
+                                 path, line, vertex ? "vertex" : "normal", number, (int)(t - tok < 16 ? t - tok : 16),
+                                 st + tok);
+        }
+    }
+    return VKRT_OK;
+}
+
+static void fail_in_callback(obj_state *s, vkrt_result r)
+{
+    if (s->error == VKRT_OK) s->error = r;
+}
+
+static void on_vertex(void *user, float x, float y, float z)
+{
+    obj_state *s = user;
+    if (s->error) return;
+    if (core_grow(s->c, (void **)&s->positions, &s->position_capacity, s->position_count + 1, 3 * sizeof(float))) {
+        fail_in_callback(s, core_fail(s->c, VKRT_ERROR_OUT_OF_MEMORY, "%s: out of memory reading vertices", s->path));
+        return;
+    }
+    float *v = s->positions + 3 * s->position_count++;
+    v[0] = x;
+    v[1] = y;
+    v[2] = z;
+    if (!isfinite(x) || !isfinite(y) || !isfinite(z)) {
+        /* A finite decimal too large for a float. */
+        size_t line = statement_line(s->text, s->size, "v", s->position_count);
+        fail_in_callback(s, core_fail(s->c, VKRT_ERROR_INVALID_GEOMETRY,
+                                      "%s: line %zu: vertex %zu has a non-finite coordinate (overflows a float)",
+                                      s->path, line, s->position_count));
+    }
+}
+
+static void on_normal(void *user, float x, float y, float z)
+{
+    obj_state *s = user;
+    if (s->error) return;
+    if (core_grow(s->c, (void **)&s->normals, &s->normal_capacity, s->normal_count + 1, 3 * sizeof(float))) {
+        fail_in_callback(s, core_fail(s->c, VKRT_ERROR_OUT_OF_MEMORY, "%s: out of memory reading normals", s->path));
+        return;
+    }
+    float *n = s->normals + 3 * s->normal_count++;
+    n[0] = x;
+    n[1] = y;
+    n[2] = z;
+    if (!isfinite(x) || !isfinite(y) || !isfinite(z)) {
+        size_t line = statement_line(s->text, s->size, "vn", s->normal_count);
+        fail_in_callback(s, core_fail(s->c, VKRT_ERROR_INVALID_GEOMETRY,
+                                      "%s: line %zu: normal %zu has a non-finite coordinate (overflows a float)",
+                                      s->path, line, s->normal_count));
+    }
+}
+
+/* 1-based or negative (relative) OBJ index to 0-based; false for 0, which OBJ does not allow
+ * (tinyobjloader also yields 0 for a missing or non-numeric index). */
+static bool resolve(int raw, size_t count, int64_t *out)
+{
+    if (raw > 0) *out = (int64_t)raw - 1;
+    else if (raw < 0) *out = (int64_t)count + raw;
+    else return false;
+    return true;
+}
+
+static void on_face(void *user, const tinyobj_shim_corner *corners, size_t count)
+{
+    obj_state *s = user;
+    if (s->error) return;
+    size_t face = ++s->face_count;
+    if (count < 3) {
+        s->short_faces++;
+        return;
+    }
+    bool all_normals = true;
+    for (size_t k = 0; k < count; k++) {
+        int64_t v;
+        if (!resolve(corners[k].v, s->position_count, &v) || v < 0) {
+            size_t line = statement_line(s->text, s->size, "f", face);
+            fail_in_callback(s, core_fail(s->c, VKRT_ERROR_INVALID_GEOMETRY,
+                                          corners[k].v == 0
+                                              ? "%s: line %zu: face %zu: corner %zu has vertex index 0 or no number "
+                                                "(OBJ indices start at 1)"
+                                              : "%s: line %zu: face %zu: corner %zu has relative index %d, before the "
+                                                "first vertex",
+                                          s->path, line, face, k + 1, corners[k].v));
+            return;
+        }
+        int64_t vn;
+        if (corners[k].vn == 0) all_normals = false;
+        else if (resolve(corners[k].vn, s->normal_count, &vn) && vn < 0) {
+            size_t line = statement_line(s->text, s->size, "f", face);
+            fail_in_callback(s, core_fail(s->c, VKRT_ERROR_INVALID_GEOMETRY,
+                                          "%s: line %zu: face %zu: corner %zu has relative normal index %d, before "
+                                          "the first normal",
+                                          s->path, line, face, k + 1, corners[k].vn));
+            return;
+        }
+    }
+    if (core_grow(s->c, (void **)&s->tris, &s->tri_capacity, s->tri_count + (count - 2), sizeof *s->tris)) {
+        fail_in_callback(s, core_fail(s->c, VKRT_ERROR_OUT_OF_MEMORY, "%s: out of memory reading faces", s->path));
+        return;
+    }
+    int64_t v0, vn0 = -1;
+    resolve(corners[0].v, s->position_count, &v0);
+    if (all_normals) resolve(corners[0].vn, s->normal_count, &vn0);
+    for (size_t k = 1; k + 1 < count; k++) {
+        obj_tri *t = &s->tris[s->tri_count++];
+        t->face = face;
+        t->v[0] = v0;
+        resolve(corners[k].v, s->position_count, &t->v[1]);
+        resolve(corners[k + 1].v, s->position_count, &t->v[2]);
+        t->vn[0] = vn0;
+        t->vn[1] = t->vn[2] = -1;
+        if (all_normals) {
+            resolve(corners[k].vn, s->normal_count, &t->vn[1]);
+            resolve(corners[k + 1].vn, s->normal_count, &t->vn[2]);
+        }
+    }
+}
+
+static void on_group(void *user)
+{
+    obj_state *s = user;
+    if (s->error) return;
+    if (s->object_count && s->object_starts[s->object_count - 1] == s->tri_count) return;
+    if (core_grow(s->c, (void **)&s->object_starts, &s->object_capacity, s->object_count + 1, sizeof(size_t))) {
+        fail_in_callback(s, core_fail(s->c, VKRT_ERROR_OUT_OF_MEMORY, "%s: out of memory reading groups", s->path));
+        return;
+    }
+    s->object_starts[s->object_count++] = s->tri_count;
+}
+
+static vkrt_result read_file(core *c, const char *path, char **out_text, size_t *out_size)
+{
+    *out_text = NULL;
+    *out_size = 0;
+    FILE *f = fopen(path, "rb");
+    if (!f) return core_fail(c, VKRT_ERROR_IO, "%s: cannot open: %s", path, strerror(errno));
+    vkrt_result r = VKRT_OK;
+    char *text = NULL;
+    size_t size = 0, capacity = 0;
+    for (;;) {
+        if (core_grow(c, (void **)&text, &capacity, size + 65536, 1)) {
+            r = core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "%s: out of memory reading the file", path);
+            break;
+        }
+        size_t got = fread(text + size, 1, capacity - size, f);
+        size += got;
+        if (got == 0) {
+            if (ferror(f)) r = core_fail(c, VKRT_ERROR_IO, "%s: cannot read: %s", path, strerror(errno));
+            break;
+        }
+    }
+    fclose(f);
+    if (r != VKRT_OK) {
+        core_free(c, text);
+        return r;
+    }
+    *out_text = text;
+    *out_size = size;
+    return VKRT_OK;
+}
+
+/* Appends triangles [first, last) as one primitive over the vertices they use. */
+static vkrt_result append_object(obj_state *s, mesh *m, size_t first, size_t last, uint32_t *remap,
+                                 size_t object)
+{
+    core *c = s->c;
+    size_t tris = last - first;
+    vkrt_result r = VKRT_ERROR_OUT_OF_MEMORY;
+    uint32_t *indices = core_alloc_array(c, tris, 3 * sizeof(uint32_t));
+    float *local = core_alloc_array(c, tris, 9 * sizeof(float)); /* at most 3 new vertices per triangle */
+    size_t used = 0;
+    if (!indices || !local) {
+        r = core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "%s: out of memory building object %zu", s->path, object);
+        goto done;
+    }
+    for (size_t t = 0; t < tris; t++) {
+        for (int k = 0; k < 3; k++) {
+            size_t v = (size_t)s->tris[first + t].v[k];
+            if (remap[v] == UINT32_MAX) {
+                remap[v] = (uint32_t)used;
+                memcpy(local + 3 * used, s->positions + 3 * v, 3 * sizeof(float));
+                used++;
+            }
+            indices[3 * t + k] = remap[v];
+        }
+    }
+    char what[64];
+    snprintf(what, sizeof what, "object %zu", object);
+    size_t base = m->tri_count;
+    r = mesh_append_indexed(c, m, &(mesh_primitive){ .positions = local, .vertex_count = used,
+                                                     .indices = indices, .index_count = 3 * tris },
+                            s->path, what);
+    if (r != VKRT_OK) goto done;
+    /* The file's own normals replace the computed ones on faces that give one per corner. */
+    for (size_t t = 0; t < tris; t++) {
+        const obj_tri *src = &s->tris[first + t];
+        if (src->vn[0] < 0) continue;
+        for (int k = 0; k < 3; k++) {
+            const float *n = s->normals + 3 * (size_t)src->vn[k];
+            double len = sqrt((double)n[0] * n[0] + (double)n[1] * n[1] + (double)n[2] * n[2]);
+            if (!(len > 0.0)) continue; /* "vn 0 0 0": keep the computed normal */
+            float *out = m->normals + (base + t) * 9 + 3 * k;
+            for (int j = 0; j < 3; j++) out[j] = (float)(n[j] / len);
+        }
+    }
+done:
+    for (size_t t = 0; t < tris; t++)
+        for (int k = 0; k < 3; k++) remap[(size_t)s->tris[first + t].v[k]] = UINT32_MAX;
+    core_free(c, indices);
+    core_free(c, local);
+    return r;
+}
+
+static vkrt_result check_indices(obj_state *s)
+{
+    for (size_t t = 0; t < s->tri_count; t++) {
+        const obj_tri *tri = &s->tris[t];
+        for (int k = 0; k < 3; k++) {
+            if (tri->v[k] >= (int64_t)s->position_count)
+                return core_fail(s->c, VKRT_ERROR_INVALID_GEOMETRY,
+                                 "%s: line %zu: face %zu refers to vertex %lld, but the file has %zu vertices", s->path,
+                                 statement_line(s->text, s->size, "f", tri->face), tri->face,
+                                 (long long)tri->v[k] + 1, s->position_count);
+            if (tri->vn[k] < -1 || tri->vn[k] >= (int64_t)s->normal_count)
+                return core_fail(s->c, VKRT_ERROR_INVALID_GEOMETRY,
+                                 "%s: line %zu: face %zu refers to normal %lld, but the file has %zu normals", s->path,
+                                 statement_line(s->text, s->size, "f", tri->face), tri->face,
+                                 (long long)tri->vn[k] + 1, s->normal_count);
+        }
+    }
+    return VKRT_OK;
+}
+
+vkrt_result mesh_load_obj(core *c, const char *path, mesh *m)
+{
+    memset(m, 0, sizeof *m);
+    obj_state s = { .c = c, .path = path };
+    uint32_t *remap = NULL;
+    char *text = NULL;
+    size_t size = 0;
+    vkrt_result r = read_file(c, path, &text, &size);
+    if (r != VKRT_OK) goto fail;
+    s.text = text;
+    s.size = size;
+    obj_scan scan;
+    if ((r = scan_text(c, path, text, size, &scan)) != VKRT_OK) goto fail;
+    if (scan.statements == 0 && scan.unknown > 0) {
+        r = core_fail(c, VKRT_ERROR_PARSE, "%s: not an OBJ file: none of its %zu lines is an OBJ statement", path,
+                      scan.unknown);
+        goto fail;
+    }
+    if (scan.vertices > (size_t)INT32_MAX) {
+        r = core_fail(c, VKRT_ERROR_LIMIT, "%s: more than %d vertices", path, INT32_MAX);
+        goto fail;
+    }
+
+    on_group(&s); /* faces before any `o` or `g` form the first object */
+    char message[256];
+    tinyobj_shim_status status = tinyobj_shim_parse(
+        text, size,
+        &(tinyobj_shim_callbacks){ .user = &s, .vertex = on_vertex, .normal = on_normal, .face = on_face,
+                                   .group = on_group },
+        message, sizeof message);
+    if (s.error) {
+        r = s.error;
+        goto fail;
+    }
+    if (status == TINYOBJ_SHIM_OUT_OF_MEMORY) {
+        r = core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "%s: out of memory in tinyobjloader", path);
+        goto fail;
+    }
+    if (status != TINYOBJ_SHIM_OK) {
+        r = core_fail(c, VKRT_ERROR_PARSE, "%s: tinyobjloader: %s", path, message);
+        goto fail;
+    }
+    if ((r = check_indices(&s)) != VKRT_OK) goto fail;
+
+    if (s.tri_count == 0) {
+        if (scan.lines || scan.points)
+            r = core_fail(c, VKRT_ERROR_EMPTY_SCENE, "%s: has only points or lines (%zu `l`, %zu `p`), no faces", path,
+                          scan.lines, scan.points);
+        else if (s.short_faces)
+            r = core_fail(c, VKRT_ERROR_EMPTY_SCENE, "%s: has no face with 3 or more corners", path);
+        else
+            r = core_fail(c, VKRT_ERROR_EMPTY_SCENE, "%s: has no faces", path);
+        goto fail;
+    }
+    if (s.tri_count > UINT32_MAX) {
+        r = core_fail(c, VKRT_ERROR_LIMIT, "%s: more than %u triangles", path, UINT32_MAX);
+        goto fail;
+    }
+
+    core_free(c, text); /* the triangles no longer need it, and the mesh may be large */
+    text = NULL;
+    s.text = NULL;
+    s.size = 0;
+    remap = core_alloc_array(c, s.position_count, sizeof *remap);
+    if (!remap) {
+        r = core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "%s: out of memory", path);
+        goto fail;
+    }
+    memset(remap, 0xff, s.position_count * sizeof *remap);
+    for (size_t o = 0; o < s.object_count; o++) {
+        size_t first = s.object_starts[o];
+        size_t last = o + 1 < s.object_count ? s.object_starts[o + 1] : s.tri_count;
+        if (first == last) continue;
+        if ((r = append_object(&s, m, first, last, remap, o)) != VKRT_OK) goto fail;
+    }
+    mesh_update_bounds(m);
+    r = VKRT_OK;
+    goto done;
+fail:
+    mesh_destroy(c, m);
+done:
+    core_free(c, remap);
+    core_free(c, text);
+    core_free(c, s.positions);
+    core_free(c, s.normals);
+    core_free(c, s.tris);
+    core_free(c, s.object_starts);
+    return r;
+}

@@ -1,0 +1,10 @@
+/* GLSL sources of shaders/, includes inlined, generated into the build by
+ * scripts/embed_shaders.py. */
+#ifndef VKRT_SHADERS_EMBEDDED_H
+#define VKRT_SHADERS_EMBEDDED_H
+
+extern const char vkrt_shader_trace_comp[];
+/* Test only: copies every shared-struct field out, to check the std430 layout on the device. */
+extern const char vkrt_shader_layout_check_comp[];
+
+#endif

@@ -1,0 +1,171 @@
+#include "vk_buffer.h"
+
+#include <string.h>
+
+static int find_memory_type(const VkPhysicalDeviceMemoryProperties *mem, uint32_t type_bits,
+                            VkMemoryPropertyFlags required, VkMemoryPropertyFlags preferred)
+{
+    for (int pass = 0; pass < 2; pass++) {
+        VkMemoryPropertyFlags want = pass == 0 ? (required | preferred) : required;
+        for (uint32_t i = 0; i < mem->memoryTypeCount; i++) {
+            if (!(type_bits & (1u << i))) continue;
+            if ((mem->memoryTypes[i].propertyFlags & want) == want) return (int)i;
+        }
+    }
+    return -1;
+}
+
+vkrt_result vk_buffer_create(vk_context *vk, VkDeviceSize size, VkBufferUsageFlags usage, vk_memory_use use,
+                             const char *label, vk_buffer *out)
+{
+    memset(out, 0, sizeof *out);
+    out->size = size;
+    VkBufferCreateInfo info = {
+        .sType = VK_STRUCTURE_TYPE_BUFFER_CREATE_INFO,
+        .size = size ? size : 16,
+        .usage = usage,
+        .sharingMode = VK_SHARING_MODE_EXCLUSIVE,
+    };
+    VkResult res = vkCreateBuffer(vk->device, &info, NULL, &out->buffer);
+    if (res != VK_SUCCESS) return vk_fail(vk, res, "vkCreateBuffer");
+    vk_label(vk, VK_OBJECT_TYPE_BUFFER, (uint64_t)out->buffer, label);
+
+    VkMemoryRequirements req;
+    vkGetBufferMemoryRequirements(vk->device, out->buffer, &req);
+    VkMemoryPropertyFlags required, preferred;
+    if (use == VK_MEMORY_DEVICE) {
+        required = VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT;
+        preferred = VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT;
+    } else {
+        required = VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT;
+        preferred = VK_MEMORY_PROPERTY_HOST_CACHED_BIT;
+    }
+    int type = find_memory_type(&vk->memory, req.memoryTypeBits, required, preferred);
+    if (type < 0) type = find_memory_type(&vk->memory, req.memoryTypeBits, 0, 0);
+    if (type < 0) {
+        vk_buffer_destroy(vk, out);
+        return core_fail(vk->core, VKRT_ERROR_VULKAN, "no memory type for buffer %s", label);
+    }
+    VkMemoryPropertyFlags flags = vk->memory.memoryTypes[type].propertyFlags;
+    /* A small scene on a large device may keep host-visible memory that is not device-local,
+     * so staging is decided by what the chosen type offers, not by what was asked for. */
+    VkMemoryAllocateInfo alloc = {
+        .sType = VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO,
+        .allocationSize = req.size,
+        .memoryTypeIndex = (uint32_t)type,
+    };
+    res = vkAllocateMemory(vk->device, &alloc, NULL, &out->memory);
+    if (res != VK_SUCCESS) {
+        vk_buffer_destroy(vk, out);
+        vkrt_result r = vk_fail(vk, res, "vkAllocateMemory");
+        core_fail(vk->core, r, "vkAllocateMemory of %llu bytes for %s failed: %s", (unsigned long long)req.size,
+                  label, vk_result_string(res));
+        return r;
+    }
+    res = vkBindBufferMemory(vk->device, out->buffer, out->memory, 0);
+    if (res != VK_SUCCESS) {
+        vk_buffer_destroy(vk, out);
+        return vk_fail(vk, res, "vkBindBufferMemory");
+    }
+    if (flags & VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT) {
+        res = vkMapMemory(vk->device, out->memory, 0, VK_WHOLE_SIZE, 0, &out->mapped);
+        if (res != VK_SUCCESS) {
+            vk_buffer_destroy(vk, out);
+            return vk_fail(vk, res, "vkMapMemory");
+        }
+        out->coherent = flags & VK_MEMORY_PROPERTY_HOST_COHERENT_BIT;
+    }
+    return VKRT_OK;
+}
+
+void vk_buffer_destroy(vk_context *vk, vk_buffer *b)
+{
+    if (b->mapped) vkUnmapMemory(vk->device, b->memory);
+    if (b->buffer) vkDestroyBuffer(vk->device, b->buffer, NULL);
+    if (b->memory) vkFreeMemory(vk->device, b->memory, NULL);
+    memset(b, 0, sizeof *b);
+}
+
+static vkrt_result flush(vk_context *vk, vk_buffer *b)
+{
+    if (b->coherent) return VKRT_OK;
+    VkMappedMemoryRange range = { .sType = VK_STRUCTURE_TYPE_MAPPED_MEMORY_RANGE, .memory = b->memory, .size = VK_WHOLE_SIZE };
+    VkResult res = vkFlushMappedMemoryRanges(vk->device, 1, &range);
+    return res == VK_SUCCESS ? VKRT_OK : vk_fail(vk, res, "vkFlushMappedMemoryRanges");
+}
+
+vkrt_result vk_buffer_invalidate(vk_context *vk, vk_buffer *b)
+{
+    if (b->coherent) return VKRT_OK;
+    VkMappedMemoryRange range = { .sType = VK_STRUCTURE_TYPE_MAPPED_MEMORY_RANGE, .memory = b->memory, .size = VK_WHOLE_SIZE };
+    VkResult res = vkInvalidateMappedMemoryRanges(vk->device, 1, &range);
+    return res == VK_SUCCESS ? VKRT_OK : vk_fail(vk, res, "vkInvalidateMappedMemoryRanges");
+}
+
+vkrt_result vk_buffer_upload(vk_context *vk, vk_buffer *dst, const void *data, VkDeviceSize size)
+{
+    if (dst->mapped) {
+        memcpy(dst->mapped, data, (size_t)size);
+        return flush(vk, dst);
+    }
+    vk_buffer staging;
+    vkrt_result r = vk_buffer_create(vk, size, VK_BUFFER_USAGE_TRANSFER_SRC_BIT, VK_MEMORY_READBACK, "vkrt staging", &staging);
+    if (r != VKRT_OK) return r;
+    memcpy(staging.mapped, data, (size_t)size);
+    if ((r = flush(vk, &staging)) == VKRT_OK) {
+        VkCommandBuffer cmd;
+        if ((r = vk_commands_begin(vk, &cmd)) == VKRT_OK) {
+            VkBufferCopy region = { .size = size };
+            vkCmdCopyBuffer(cmd, staging.buffer, dst->buffer, 1, &region);
+            r = vk_commands_submit_wait(vk, cmd);
+        }
+    }
+    vk_buffer_destroy(vk, &staging);
+    return r;
+}
+
+vkrt_result vk_commands_begin(vk_context *vk, VkCommandBuffer *out)
+{
+    VkCommandBufferAllocateInfo alloc = {
+        .sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO,
+        .commandPool = vk->command_pool,
+        .level = VK_COMMAND_BUFFER_LEVEL_PRIMARY,
+        .commandBufferCount = 1,
+    };
+    VkResult res = vkAllocateCommandBuffers(vk->device, &alloc, out);
+    if (res != VK_SUCCESS) return vk_fail(vk, res, "vkAllocateCommandBuffers");
+    VkCommandBufferBeginInfo begin = {
+        .sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO,
+        .flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT,
+    };
+    res = vkBeginCommandBuffer(*out, &begin);
+    if (res != VK_SUCCESS) {
+        vkFreeCommandBuffers(vk->device, vk->command_pool, 1, out);
+        return vk_fail(vk, res, "vkBeginCommandBuffer");
+    }
+    return VKRT_OK;
+}
+
+vkrt_result vk_commands_submit_wait(vk_context *vk, VkCommandBuffer cmd)
+{
+    VkFence fence = VK_NULL_HANDLE;
+    VkResult res = vkEndCommandBuffer(cmd);
+    const char *call = "vkEndCommandBuffer";
+    if (res == VK_SUCCESS) {
+        VkFenceCreateInfo fence_info = { .sType = VK_STRUCTURE_TYPE_FENCE_CREATE_INFO };
+        res = vkCreateFence(vk->device, &fence_info, NULL, &fence);
+        call = "vkCreateFence";
+    }
+    if (res == VK_SUCCESS) {
+        VkSubmitInfo submit = { .sType = VK_STRUCTURE_TYPE_SUBMIT_INFO, .commandBufferCount = 1, .pCommandBuffers = &cmd };
+        res = vkQueueSubmit(vk->queue, 1, &submit, fence);
+        call = "vkQueueSubmit";
+    }
+    if (res == VK_SUCCESS) {
+        res = vkWaitForFences(vk->device, 1, &fence, VK_TRUE, UINT64_MAX);
+        call = "vkWaitForFences";
+    }
+    if (fence) vkDestroyFence(vk->device, fence, NULL);
+    vkFreeCommandBuffers(vk->device, vk->command_pool, 1, &cmd);
+    return res == VK_SUCCESS ? VKRT_OK : vk_fail(vk, res, call);
+}

@@ -1,0 +1,50 @@
+/* The Vulkan side of a context: instance, optional validation layer and its messenger,
+ * the chosen physical device, one compute queue, a command pool and the pipeline cache. */
+#ifndef VKRT_VK_CONTEXT_H
+#define VKRT_VK_CONTEXT_H
+
+#include <stdbool.h>
+#include <vulkan/vulkan.h>
+
+#include "core.h"
+
+struct vk_pipelines;
+
+typedef struct vk_context {
+    core *core;                       /* borrowed from the owning vkrt_context */
+    VkInstance instance;
+    VkDebugUtilsMessengerEXT messenger;
+    PFN_vkDestroyDebugUtilsMessengerEXT destroy_messenger;
+    PFN_vkSetDebugUtilsObjectNameEXT set_object_name;
+    VkPhysicalDevice physical;
+    VkPhysicalDeviceProperties properties;
+    VkPhysicalDeviceMemoryProperties memory;
+    VkDevice device;
+    VkQueue queue;
+    uint32_t queue_family;
+    bool timestamps;                  /* the queue supports timestamp queries */
+    double timestamp_period_ns;
+    VkCommandPool command_pool;
+    VkPipelineCache pipeline_cache;
+    char *pipeline_cache_path;        /* NULL: in memory only */
+    uint32_t validation_messages;     /* validation warnings and errors received */
+    struct vk_pipelines *pipelines;   /* compiled lazily, owned (vk_pipeline.c) */
+} vk_context;
+
+/* Creates everything for the device the desc chooses. Failures: VKRT_ERROR_NO_DEVICE (no
+ * loader, no driver, no usable device, index out of range), VKRT_ERROR_VULKAN (a call
+ * failed, or validation asked for and not installed), VKRT_ERROR_OUT_OF_MEMORY. */
+vkrt_result vk_context_create(core *c, const vkrt_context_desc *desc, vk_context **out);
+/* Waits for the device, saves the pipeline cache, destroys everything; NULL is a no-op. */
+void vk_context_destroy(vk_context *vk);
+
+vkrt_result vk_devices_list(core *c, vkrt_device_info *out, uint32_t *inout_count);
+
+/* Records a failed Vulkan call: maps VkResult to a vkrt_result and names the call. */
+vkrt_result vk_fail(vk_context *vk, VkResult result, const char *call);
+const char *vk_result_string(VkResult result);
+
+/* Labels a Vulkan object for validation messages and debuggers, where debug utils exist. */
+void vk_label(vk_context *vk, VkObjectType type, uint64_t handle, const char *name);
+
+#endif

@@ -1,0 +1,192 @@
+#include "vk_pipeline.h"
+
+#include <glslang/Include/glslang_c_interface.h>
+#include <glslang/Public/resource_limits_c.h>
+#include <string.h>
+
+#include "../shaders/vkrt_shared.h"
+#include "shaders_embedded.h"
+
+/* 4 modes x 2 traversals x 3 heat kinds bounds the variants one context can ever create. */
+#define MAX_VARIANTS 32
+
+typedef struct vk_pipelines {
+    VkShaderModule trace_module;
+    VkDescriptorSetLayout set_layout;
+    VkPipelineLayout layout;
+    uint32_t count;
+    vk_trace_variant variants[MAX_VARIANTS];
+    VkPipeline pipelines[MAX_VARIANTS];
+} vk_pipelines;
+
+vkrt_result vk_compile_glsl(core *c, const char *name, const char *source, uint32_t **out_words, size_t *out_count)
+{
+    *out_words = NULL;
+    *out_count = 0;
+    const glslang_input_t input = {
+        .language = GLSLANG_SOURCE_GLSL,
+        .stage = GLSLANG_STAGE_COMPUTE,
+        .client = GLSLANG_CLIENT_VULKAN,
+        .client_version = GLSLANG_TARGET_VULKAN_1_2,
+        .target_language = GLSLANG_TARGET_SPV,
+        .target_language_version = GLSLANG_TARGET_SPV_1_5,
+        .code = source,
+        .default_version = 460,
+        .default_profile = GLSLANG_NO_PROFILE,
+        .messages = GLSLANG_MSG_DEFAULT_BIT | GLSLANG_MSG_SPV_RULES_BIT | GLSLANG_MSG_VULKAN_RULES_BIT,
+        .resource = glslang_default_resource(),
+    };
+    /* glslang counts process initialisations, so paired calls are safe from several contexts. */
+    glslang_initialize_process();
+    vkrt_result r = VKRT_OK;
+    glslang_program_t *program = NULL;
+    glslang_shader_t *shader = glslang_shader_create(&input);
+    if (!shader) {
+        r = core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "glslang could not create shader %s", name);
+        goto done;
+    }
+    if (!glslang_shader_preprocess(shader, &input) || !glslang_shader_parse(shader, &input)) {
+        r = core_fail(c, VKRT_ERROR_VULKAN, "shader %s does not compile: %s", name, glslang_shader_get_info_log(shader));
+        goto done;
+    }
+    program = glslang_program_create();
+    glslang_program_add_shader(program, shader);
+    if (!glslang_program_link(program, GLSLANG_MSG_SPV_RULES_BIT | GLSLANG_MSG_VULKAN_RULES_BIT)) {
+        r = core_fail(c, VKRT_ERROR_VULKAN, "shader %s does not link: %s", name, glslang_program_get_info_log(program));
+        goto done;
+    }
+    glslang_spv_options_t options = { .disable_optimizer = false, .validate = true };
+    glslang_program_SPIRV_generate_with_options(program, GLSLANG_STAGE_COMPUTE, &options);
+    const char *messages = glslang_program_SPIRV_get_messages(program);
+    if (messages && messages[0]) core_log(c, VKRT_LOG_DEBUG, "shader %s: %s", name, messages);
+    size_t count = glslang_program_SPIRV_get_size(program);
+    uint32_t *words = core_alloc_array(c, count, sizeof *words);
+    if (!words) {
+        r = core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "out of memory for the SPIR-V of %s", name);
+        goto done;
+    }
+    glslang_program_SPIRV_get(program, words);
+    *out_words = words;
+    *out_count = count;
+done:
+    if (program) glslang_program_delete(program);
+    if (shader) glslang_shader_delete(shader);
+    glslang_finalize_process();
+    return r;
+}
+
+static vkrt_result create_layouts(vk_context *vk, vk_pipelines *p)
+{
+    VkDescriptorSetLayoutBinding bindings[] = {
+        { VKRT_BINDING_NODES, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, VK_SHADER_STAGE_COMPUTE_BIT, NULL },
+        { VKRT_BINDING_TRIS, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, VK_SHADER_STAGE_COMPUTE_BIT, NULL },
+        { VKRT_BINDING_IMAGE, VK_DESCRIPTOR_TYPE_STORAGE_IMAGE, 1, VK_SHADER_STAGE_COMPUTE_BIT, NULL },
+        { VKRT_BINDING_HITS, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, VK_SHADER_STAGE_COMPUTE_BIT, NULL },
+    };
+    VkDescriptorSetLayoutCreateInfo set_info = {
+        .sType = VK_STRUCTURE_TYPE_DESCRIPTOR_SET_LAYOUT_CREATE_INFO,
+        .bindingCount = sizeof bindings / sizeof bindings[0],
+        .pBindings = bindings,
+    };
+    VkResult res = vkCreateDescriptorSetLayout(vk->device, &set_info, NULL, &p->set_layout);
+    if (res != VK_SUCCESS) return vk_fail(vk, res, "vkCreateDescriptorSetLayout");
+    VkPushConstantRange push = { .stageFlags = VK_SHADER_STAGE_COMPUTE_BIT, .size = sizeof(vkrt_gpu_push) };
+    VkPipelineLayoutCreateInfo layout_info = {
+        .sType = VK_STRUCTURE_TYPE_PIPELINE_LAYOUT_CREATE_INFO,
+        .setLayoutCount = 1,
+        .pSetLayouts = &p->set_layout,
+        .pushConstantRangeCount = 1,
+        .pPushConstantRanges = &push,
+    };
+    res = vkCreatePipelineLayout(vk->device, &layout_info, NULL, &p->layout);
+    if (res != VK_SUCCESS) return vk_fail(vk, res, "vkCreatePipelineLayout");
+    return VKRT_OK;
+}
+
+static vkrt_result create_module(vk_context *vk, vk_pipelines *p)
+{
+    uint32_t *words;
+    size_t count;
+    vkrt_result r = vk_compile_glsl(vk->core, "trace.comp", vkrt_shader_trace_comp, &words, &count);
+    if (r != VKRT_OK) return r;
+    VkShaderModuleCreateInfo info = {
+        .sType = VK_STRUCTURE_TYPE_SHADER_MODULE_CREATE_INFO,
+        .codeSize = count * sizeof *words,
+        .pCode = words,
+    };
+    VkResult res = vkCreateShaderModule(vk->device, &info, NULL, &p->trace_module);
+    core_free(vk->core, words);
+    if (res != VK_SUCCESS) return vk_fail(vk, res, "vkCreateShaderModule");
+    return VKRT_OK;
+}
+
+static vkrt_result ensure_base(vk_context *vk)
+{
+    if (vk->pipelines) return VKRT_OK;
+    vk_pipelines *p = core_calloc_array(vk->core, 1, sizeof *p);
+    if (!p) return core_fail(vk->core, VKRT_ERROR_OUT_OF_MEMORY, "out of memory for pipelines");
+    vk->pipelines = p;
+    vkrt_result r = create_layouts(vk, p);
+    if (r == VKRT_OK) r = create_module(vk, p);
+    if (r != VKRT_OK) vk_pipelines_destroy(vk);
+    return r;
+}
+
+vkrt_result vk_trace_pipeline_get(vk_context *vk, vk_trace_variant variant, vk_trace_pipeline *out)
+{
+    vkrt_result r = ensure_base(vk);
+    if (r != VKRT_OK) return r;
+    vk_pipelines *p = vk->pipelines;
+    out->set_layout = p->set_layout;
+    out->layout = p->layout;
+    for (uint32_t i = 0; i < p->count; i++) {
+        if (memcmp(&p->variants[i], &variant, sizeof variant) == 0) {
+            out->pipeline = p->pipelines[i];
+            return VKRT_OK;
+        }
+    }
+    if (p->count == MAX_VARIANTS) return core_fail(vk->core, VKRT_ERROR_LIMIT, "too many pipeline variants");
+
+    const VkSpecializationMapEntry entries[] = {
+        { VKRT_SPEC_MODE, offsetof(vk_trace_variant, mode), sizeof(uint32_t) },
+        { VKRT_SPEC_TRAVERSAL, offsetof(vk_trace_variant, traversal), sizeof(uint32_t) },
+        { VKRT_SPEC_HEAT, offsetof(vk_trace_variant, heat), sizeof(uint32_t) },
+    };
+    VkSpecializationInfo spec = {
+        .mapEntryCount = sizeof entries / sizeof entries[0],
+        .pMapEntries = entries,
+        .dataSize = sizeof variant,
+        .pData = &variant,
+    };
+    VkComputePipelineCreateInfo info = {
+        .sType = VK_STRUCTURE_TYPE_COMPUTE_PIPELINE_CREATE_INFO,
+        .stage = {
+            .sType = VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO,
+            .stage = VK_SHADER_STAGE_COMPUTE_BIT,
+            .module = p->trace_module,
+            .pName = "main",
+            .pSpecializationInfo = &spec,
+        },
+        .layout = p->layout,
+    };
+    VkPipeline pipeline;
+    VkResult res = vkCreateComputePipelines(vk->device, vk->pipeline_cache, 1, &info, NULL, &pipeline);
+    if (res != VK_SUCCESS) return vk_fail(vk, res, "vkCreateComputePipelines");
+    vk_label(vk, VK_OBJECT_TYPE_PIPELINE, (uint64_t)pipeline, "vkrt trace");
+    p->variants[p->count] = variant;
+    p->pipelines[p->count++] = pipeline;
+    out->pipeline = pipeline;
+    return VKRT_OK;
+}
+
+void vk_pipelines_destroy(vk_context *vk)
+{
+    vk_pipelines *p = vk->pipelines;
+    if (!p) return;
+    for (uint32_t i = 0; i < p->count; i++) vkDestroyPipeline(vk->device, p->pipelines[i], NULL);
+    if (p->trace_module) vkDestroyShaderModule(vk->device, p->trace_module, NULL);
+    if (p->layout) vkDestroyPipelineLayout(vk->device, p->layout, NULL);
+    if (p->set_layout) vkDestroyDescriptorSetLayout(vk->device, p->set_layout, NULL);
+    core_free(vk->core, p);
+    vk->pipelines = NULL;
+}

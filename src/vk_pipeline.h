@@ -1,0 +1,34 @@
+/* The trace pipeline: GLSL embedded in the library compiled to SPIR-V through glslang's C API
+ * (once per context), one descriptor set layout and pipeline layout, and one compute pipeline
+ * per specialisation (mode, traversal, heat), created on first use and kept. */
+#ifndef VKRT_VK_PIPELINE_H
+#define VKRT_VK_PIPELINE_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "vk_context.h"
+
+typedef struct vk_trace_variant {
+    uint32_t mode;       /* VKRT_GPU_MODE_* */
+    uint32_t traversal;  /* VKRT_GPU_TRAVERSAL_* */
+    uint32_t heat;       /* VKRT_GPU_HEAT_* */
+} vk_trace_variant;
+
+typedef struct vk_trace_pipeline {
+    VkDescriptorSetLayout set_layout;
+    VkPipelineLayout layout;
+    VkPipeline pipeline;
+} vk_trace_pipeline;
+
+/* Returns the pipeline for a variant, compiling the shader and creating the layouts the first
+ * time. A shader that fails to compile is VKRT_ERROR_VULKAN with glslang's log as detail. */
+vkrt_result vk_trace_pipeline_get(vk_context *vk, vk_trace_variant variant, vk_trace_pipeline *out);
+
+/* GLSL -> SPIR-V for a compute shader. On success *out_words is allocated with the core
+ * allocator (the caller frees it) and *out_count holds its 32-bit words. */
+vkrt_result vk_compile_glsl(core *c, const char *name, const char *source, uint32_t **out_words, size_t *out_count);
+
+void vk_pipelines_destroy(vk_context *vk);
+
+#endif

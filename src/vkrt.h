@@ -1,0 +1,266 @@
+/* vkrt: a ray tracer for triangle meshes, with a Vulkan compute backend and a C reference.
+ *
+ * Usage in short:
+ *
+ *     vkrt_context *ctx;
+ *     if (vkrt_context_create(&(vkrt_context_desc){ 0 }, &ctx) != VKRT_OK) ...
+ *     vkrt_scene *scene;
+ *     vkrt_scene_create(ctx, &(vkrt_scene_desc){ .path = "bunny.obj" }, &scene);
+ *     float *rgba = malloc(vkrt_render_floats(512, 512) * sizeof *rgba);
+ *     vkrt_render(ctx, scene, &(vkrt_render_desc){ .width = 512, .height = 512 }, rgba, ...);
+ *     vkrt_image_save(ctx, "out.png", &(vkrt_image_view){ rgba, 512, 512, VKRT_MODE_NORMAL });
+ *
+ * Conventions:
+ * - Every desc field's zero value is its default; `(desc){ 0 }` is always valid.
+ * - Every fallible call returns a vkrt_result; products come out through the last `out_`
+ *   parameter, which is set to NULL (or zero) on failure. vkrt_context_last_error() then
+ *   holds a message naming what was wrong (the file, the field, the Vulkan call).
+ * - Objects are created and destroyed in pairs; destroying NULL is a no-op.
+ * - The library never prints, exits or reads environment variables: messages go to the
+ *   log callback of the context, if one is given.
+ * - Thread-safety: calls on the same object are not thread-safe unless noted; different
+ *   contexts may be used from different threads at once.
+ */
+#ifndef VKRT_H
+#define VKRT_H
+
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+#define VKRT_VERSION_MAJOR 0
+#define VKRT_VERSION_MINOR 1
+#define VKRT_VERSION_PATCH 0
+/* Packed as (major << 22) | (minor << 12) | patch, like VK_MAKE_API_VERSION. */
+#define VKRT_VERSION ((VKRT_VERSION_MAJOR << 22) | (VKRT_VERSION_MINOR << 12) | VKRT_VERSION_PATCH)
+
+/* The version the library was built as (compare with VKRT_VERSION of the header). */
+uint32_t vkrt_version(void);
+
+/* Result codes. The X-macro keeps the enum and vkrt_result_string() in one list. */
+#define VKRT_RESULT_LIST(X)                                                                \
+    X(VKRT_OK, "success")                                                                  \
+    X(VKRT_ERROR_INVALID_ARGUMENT, "invalid argument")                                     \
+    X(VKRT_ERROR_OUT_OF_MEMORY, "out of memory")                                           \
+    X(VKRT_ERROR_IO, "file could not be read or written")                                  \
+    X(VKRT_ERROR_PARSE, "malformed mesh file")                                             \
+    X(VKRT_ERROR_INVALID_GEOMETRY, "invalid geometry (NaN/Inf coordinate, bad index)")     \
+    X(VKRT_ERROR_EMPTY_SCENE, "the scene has no triangles")                                \
+    X(VKRT_ERROR_UNSUPPORTED, "the file needs a feature vkrt does not support")            \
+    X(VKRT_ERROR_NO_DEVICE, "no suitable Vulkan device")                                   \
+    X(VKRT_ERROR_VULKAN, "Vulkan call failed")                                             \
+    X(VKRT_ERROR_OUT_OF_DEVICE_MEMORY, "out of device memory")                             \
+    X(VKRT_ERROR_LIMIT, "the scene exceeds a limit of the device or of vkrt")              \
+    X(VKRT_ERROR_CANCELLED, "cancelled by the progress callback")
+
+typedef enum vkrt_result {
+#define VKRT_RESULT_ENUM_(name, message) name,
+    VKRT_RESULT_LIST(VKRT_RESULT_ENUM_)
+#undef VKRT_RESULT_ENUM_
+    VKRT_RESULT_COUNT_
+} vkrt_result;
+
+/* "VKRT_ERROR_IO: file could not be read or written"; never NULL. */
+const char *vkrt_result_string(vkrt_result result);
+
+typedef enum vkrt_log_level { VKRT_LOG_ERROR, VKRT_LOG_WARN, VKRT_LOG_INFO, VKRT_LOG_DEBUG } vkrt_log_level;
+/* Receives one complete message, without a trailing newline. May be called from worker
+ * threads of the CPU backend, never from two at once. */
+typedef void (*vkrt_log_fn)(void *user, vkrt_log_level level, const char *message);
+/* fraction in [0, 1]; return false to cancel (the call then returns VKRT_ERROR_CANCELLED). */
+typedef bool (*vkrt_progress_fn)(void *user, const char *stage, float fraction);
+
+/* Memory for every host allocation of a context and the objects made with it. */
+typedef struct vkrt_allocator {
+    void *(*alloc)(void *user, size_t size); /* NULL (default): malloc; 16-byte aligned */
+    void (*free)(void *user, void *pointer); /* NULL (default): free; never given NULL */
+    void *user;
+} vkrt_allocator;
+
+typedef enum vkrt_backend {
+    VKRT_BACKEND_DEFAULT = 0, /* the GPU backend */
+    VKRT_BACKEND_GPU,         /* Vulkan compute on the chosen device (lavapipe where no GPU) */
+    VKRT_BACKEND_CPU          /* the C reference tracer, multi-threaded over tiles; no Vulkan */
+} vkrt_backend;
+
+typedef struct vkrt_context_desc {
+    vkrt_backend backend;            /* default: VKRT_BACKEND_GPU */
+    vkrt_log_fn log;                 /* NULL (default): the library prints nothing */
+    void *log_user;
+    vkrt_allocator allocator;        /* all zero (default): malloc/free */
+    bool validation;                 /* false (default): no Vulkan validation layer; when true,
+                                        the layer must be present, and every message it sends
+                                        is logged and counted */
+    bool select_device;              /* false (default): the best device (discrete > integrated
+                                        > virtual > CPU); true: device_index */
+    uint32_t device_index;           /* with select_device: 0-based, in the order of
+                                        vkrt_devices_list() */
+    uint32_t cpu_threads;            /* 0 (default): one per online core; CPU backend only */
+    const char *pipeline_cache_path; /* NULL (default): no cache on disk; else read at creation
+                                        and written back at destruction (copied) */
+} vkrt_context_desc;
+
+typedef struct vkrt_context vkrt_context;
+
+/* Creates a context: for the GPU backend, a Vulkan instance, device and compute queue.
+ * Returns VKRT_ERROR_NO_DEVICE where no Vulkan device (or no loader) exists, with the reason
+ * sent to the log. Ownership: the caller destroys *out_ctx with vkrt_context_destroy(). */
+vkrt_result vkrt_context_create(const vkrt_context_desc *desc, vkrt_context **out_ctx);
+void vkrt_context_destroy(vkrt_context *ctx);
+/* Detail of the last failure of a call on ctx ("" if none). Valid until the next call. */
+const char *vkrt_context_last_error(const vkrt_context *ctx);
+/* Validation-layer messages (warnings and errors) received so far; 0 without validation. */
+uint32_t vkrt_context_validation_messages(const vkrt_context *ctx);
+/* The device the context runs on ("CPU reference" for the CPU backend). */
+const char *vkrt_context_device_name(const vkrt_context *ctx);
+
+typedef enum vkrt_device_type {
+    VKRT_DEVICE_OTHER = 0,
+    VKRT_DEVICE_INTEGRATED_GPU,
+    VKRT_DEVICE_DISCRETE_GPU,
+    VKRT_DEVICE_VIRTUAL_GPU,
+    VKRT_DEVICE_CPU
+} vkrt_device_type;
+
+typedef struct vkrt_device_info {
+    char name[256];
+    vkrt_device_type type;
+    uint32_t vendor_id, device_id;
+    uint32_t api_version;          /* VK_MAKE_API_VERSION packing */
+    uint64_t max_storage_buffer_range;
+    bool usable;                   /* supports Vulkan 1.2 and a compute queue */
+} vkrt_device_info;
+
+/* Lists the Vulkan devices. out may be NULL to query the count; otherwise *inout_count is its
+ * capacity on input and the number written on output. desc supplies the log and allocator
+ * (NULL: defaults). Returns VKRT_ERROR_NO_DEVICE when no Vulkan loader or driver answers. */
+vkrt_result vkrt_devices_list(const vkrt_context_desc *desc, vkrt_device_info *out, uint32_t *inout_count);
+
+/* ---- scenes ------------------------------------------------------------------------- */
+
+typedef enum vkrt_bvh_builder {
+    VKRT_BVH_BUILDER_DEFAULT = 0, /* binned SAH */
+    VKRT_BVH_BUILDER_MIDPOINT,    /* the seed's: centroid midpoint on alternating axes */
+    VKRT_BVH_BUILDER_BINNED_SAH   /* surface area heuristic over 32 bins per axis */
+} vkrt_bvh_builder;
+
+typedef struct vkrt_scene_desc {
+    const char *path;             /* .obj, .gltf or .glb (borrowed for the call); NULL
+                                     (default): the built-in procedural scene */
+    bool keep_world_coordinates;  /* false (default): centre the bounding box on the origin and
+                                     scale its largest extent to 1 */
+    vkrt_bvh_builder builder;     /* default: binned SAH */
+    uint32_t max_leaf_size;       /* 0 (default): 4; binned SAH splits any larger leaf */
+    vkrt_progress_fn progress;    /* NULL (default): none */
+    void *progress_user;
+} vkrt_scene_desc;
+
+typedef struct vkrt_scene vkrt_scene;
+
+/* Loads a mesh (or makes the built-in scene), builds its BVH and, for the GPU backend,
+ * uploads it. Bad input returns VKRT_ERROR_IO, _PARSE, _INVALID_GEOMETRY, _EMPTY_SCENE or
+ * _UNSUPPORTED with a message naming the file and the problem. The scene belongs to ctx and
+ * must be destroyed before it. */
+vkrt_result vkrt_scene_create(vkrt_context *ctx, const vkrt_scene_desc *desc, vkrt_scene **out_scene);
+void vkrt_scene_destroy(vkrt_scene *scene);
+
+#define VKRT_LEAF_HISTOGRAM_BINS 17 /* leaves holding 1..16 triangles, then 17 or more */
+
+typedef struct vkrt_scene_stats {
+    uint64_t triangles;
+    uint64_t nodes, leaves;
+    uint32_t depth;                /* edges on the longest root-to-leaf path */
+    uint32_t max_leaf_triangles;
+    uint64_t leaf_histogram[VKRT_LEAF_HISTOGRAM_BINS]; /* [i]: leaves with i + 1 triangles */
+    double sah_cost;               /* C_trav = C_isect = 1, relative to the root's area */
+    double load_ms, build_ms;      /* wall-clock times of parsing and BVH construction */
+    uint64_t node_bytes, triangle_bytes; /* device (and CPU backend) buffers */
+    float bounds_min[3], bounds_max[3];  /* of the scene as traced */
+} vkrt_scene_stats;
+
+vkrt_result vkrt_scene_stats_get(const vkrt_scene *scene, vkrt_scene_stats *out_stats);
+
+/* ---- rendering ---------------------------------------------------------------------- */
+
+typedef enum vkrt_mode {
+    VKRT_MODE_DEFAULT = 0, /* normal */
+    VKRT_MODE_NORMAL,      /* rgb = shading normal * 0.5 + 0.5; a = 1 on a hit, 0 on a miss */
+    VKRT_MODE_DEPTH,       /* r = distance to the hit along the unit ray, -1 on a miss */
+    VKRT_MODE_HEATMAP,     /* r = boxes entered / leaves entered / triangles tested (vkrt_heat) */
+    VKRT_MODE_ID           /* r = triangle index in the loaded file (exact), -1 on a miss */
+} vkrt_mode;
+
+typedef enum vkrt_traversal {
+    VKRT_TRAVERSAL_DEFAULT = 0, /* BVH */
+    VKRT_TRAVERSAL_BVH,         /* iterative, explicit stack, nearer child first */
+    VKRT_TRAVERSAL_NAIVE        /* every triangle; must give the identical image */
+} vkrt_traversal;
+
+typedef enum vkrt_heat {
+    VKRT_HEAT_DEFAULT = 0, /* nodes */
+    VKRT_HEAT_NODES,       /* BVH boxes the ray enters */
+    VKRT_HEAT_LEAVES,      /* leaf boxes the ray enters (the seed's figures) */
+    VKRT_HEAT_TRIS         /* triangles tested */
+} vkrt_heat;
+
+typedef struct vkrt_camera {
+    float eye[3];          /* eye == target (e.g. all zero, the default): eye (0, 0, 1.5) and
+                              target (0, 0, 0), framing the normalised scene */
+    float target[3];
+    float up[3];           /* all zero (default): (0, 1, 0) */
+    float fov_y_degrees;   /* 0 (default): 45; vertical field of view, in (0, 180) */
+} vkrt_camera;
+
+typedef struct vkrt_render_desc {
+    uint32_t width, height;   /* 0 (default): 1024; one ray through each pixel centre, row 0
+                                 at the top */
+    vkrt_camera camera;
+    vkrt_mode mode;           /* default: normal */
+    vkrt_traversal traversal; /* default: BVH */
+    vkrt_heat heat;           /* heatmap mode only; default: nodes */
+    vkrt_progress_fn progress;/* NULL (default): none; called between tiles */
+    void *progress_user;
+} vkrt_render_desc;
+
+typedef struct vkrt_render_stats {
+    double trace_ms;   /* GPU: device time of the trace dispatches (timestamp queries);
+                          CPU: wall-clock time of the tracing threads */
+    double total_ms;   /* wall-clock time of the whole call, upload and readback included */
+    uint64_t rays;
+} vkrt_render_stats;
+
+/* Floats vkrt_render() writes for an image of width x height: 4 per pixel (RGBA), rows top
+ * to bottom. 0 when the product overflows size_t. */
+size_t vkrt_render_floats(uint32_t width, uint32_t height);
+
+/* Traces one primary ray per pixel and writes raw values (see vkrt_mode) into out_rgba.
+ * out_rgba must hold out_floats >= vkrt_render_floats(width, height) floats (borrowed for the
+ * call). stats may be NULL. */
+vkrt_result vkrt_render(vkrt_context *ctx, vkrt_scene *scene, const vkrt_render_desc *desc,
+                        float *out_rgba, size_t out_floats, vkrt_render_stats *out_stats);
+
+/* ---- images ------------------------------------------------------------------------- */
+
+typedef struct vkrt_image_view {
+    const float *rgba;       /* as written by vkrt_render() (borrowed for the call) */
+    uint32_t width, height;
+    vkrt_mode mode;          /* how raw values become colours in 8-bit formats */
+    float heat_max;          /* heatmap: the count drawn at the top of the ramp; 0 (default):
+                                the image's maximum */
+} vkrt_image_view;
+
+/* Writes an image, the format chosen by the extension: .png (8-bit colour: normals as RGB,
+ * depth as grey, ids as distinct colours, heat on a colour ramp), .pfm (the raw 32-bit floats,
+ * RGB, for exact comparisons) or .ppm (8-bit, like .png). The file is written to a temporary
+ * name beside the target and renamed, so a failure never leaves a half-written file. */
+vkrt_result vkrt_image_save(vkrt_context *ctx, const char *path, const vkrt_image_view *image);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif /* VKRT_H */

@@ -1,0 +1,73 @@
+/* Minimal test assertions: each failure prints file, line, the expression and the values,
+ * and the test keeps going so one run shows every broken fact; main returns check_exit(). */
+#ifndef VKRT_CHECK_H
+#define VKRT_CHECK_H
+
+#include <inttypes.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+
+static int check_failures;
+
+#define CHECK(x)                                                                        \
+    do {                                                                                \
+        if (!(x)) {                                                                     \
+            fprintf(stderr, "%s:%d: CHECK(%s) failed\n", __FILE__, __LINE__, #x);       \
+            check_failures++;                                                           \
+        }                                                                               \
+    } while (0)
+
+#define CHECK_MSG(x, ...)                                                               \
+    do {                                                                                \
+        if (!(x)) {                                                                     \
+            fprintf(stderr, "%s:%d: CHECK(%s) failed: ", __FILE__, __LINE__, #x);       \
+            fprintf(stderr, __VA_ARGS__);                                               \
+            fputc('\n', stderr);                                                        \
+            check_failures++;                                                           \
+        }                                                                               \
+    } while (0)
+
+#define CHECK_EQ_U64(a, b)                                                              \
+    do {                                                                                \
+        uint64_t check_a_ = (uint64_t)(a), check_b_ = (uint64_t)(b);                    \
+        if (check_a_ != check_b_) {                                                     \
+            fprintf(stderr, "%s:%d: CHECK_EQ_U64(%s, %s) failed: %" PRIu64 " != %" PRIu64 "\n", \
+                    __FILE__, __LINE__, #a, #b, check_a_, check_b_);                    \
+            check_failures++;                                                           \
+        }                                                                               \
+    } while (0)
+
+#define CHECK_NEAR(a, b, eps)                                                           \
+    do {                                                                                \
+        double check_a_ = (double)(a), check_b_ = (double)(b);                          \
+        if (!(fabs(check_a_ - check_b_) <= (double)(eps))) {                            \
+            fprintf(stderr, "%s:%d: CHECK_NEAR(%s, %s, %s) failed: %.9g vs %.9g\n",      \
+                    __FILE__, __LINE__, #a, #b, #eps, check_a_, check_b_);              \
+            check_failures++;                                                           \
+        }                                                                               \
+    } while (0)
+
+/* Runs one test function, named as the fact it checks. */
+#define RUN(test)                                                                       \
+    do {                                                                                \
+        int check_before_ = check_failures;                                             \
+        test();                                                                         \
+        fprintf(stderr, "%s %s\n", check_failures == check_before_ ? "ok  " : "FAIL", #test); \
+    } while (0)
+
+static inline int check_exit(void)
+{
+    if (check_failures) fprintf(stderr, "%d check(s) failed\n", check_failures);
+    return check_failures ? 1 : 0;
+}
+
+/* Path of ../shared/models relative to the source tree; meson passes VKRT_MODELS_DIR. */
+#ifndef VKRT_MODELS_DIR
+#define VKRT_MODELS_DIR "../shared/models"
+#endif
+#ifndef VKRT_TEST_DATA_DIR
+#define VKRT_TEST_DATA_DIR "tests/data"
+#endif
+
+#endif

@@ -1,0 +1,751 @@
+/* test_bvh: both BVH builders keep the layout invariants the GPU relies on (bvh_validate),
+ * boxes are exact, statistics are consistent, degenerate input terminates with a bounded
+ * depth, max_leaf_size holds, cancellation and out-of-memory leave nothing behind; and the
+ * same on every mesh of the shared model set. */
+#include <dirent.h>
+#include <float.h>
+#include <math.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "bvh.h"
+#include "check.h"
+#include "core.h"
+#include "mesh.h"
+
+static const vkrt_bvh_builder builders[] = { VKRT_BVH_BUILDER_MIDPOINT, VKRT_BVH_BUILDER_BINNED_SAH };
+static const char *const builder_names[] = { "midpoint", "sah" };
+#define BUILDER_COUNT 2
+
+/* ---- synthetic meshes ---------------------------------------------------------------- */
+
+static void test_mesh_free(core *c, mesh *m)
+{
+    core_free(c, m->positions);
+    core_free(c, m->normals);
+    memset(m, 0, sizeof *m);
+}
+
+static mesh test_mesh_new(core *c, uint32_t tri_count)
+{
+    mesh m = { 0 };
+    m.tri_count = tri_count;
+    m.tri_capacity = tri_count;
+    m.positions = core_calloc_array(c, (size_t)tri_count * 9, sizeof(float));
+    m.normals = core_calloc_array(c, (size_t)tri_count * 9, sizeof(float));
+    if (!m.positions || !m.normals) {
+        fprintf(stderr, "out of memory making a test mesh of %u triangles\n", tri_count);
+        exit(2);
+    }
+    for (size_t i = 0; i < (size_t)tri_count * 3; i++) m.normals[i * 3 + 2] = 1.0f;
+    return m;
+}
+
+static void set_tri(mesh *m, uint32_t i, float ax, float ay, float az, float bx, float by, float bz, float cx,
+                    float cy, float cz)
+{
+    float *p = m->positions + (size_t)i * 9;
+    p[0] = ax, p[1] = ay, p[2] = az;
+    p[3] = bx, p[4] = by, p[5] = bz;
+    p[6] = cx, p[7] = cy, p[8] = cz;
+}
+
+static void update_bounds(mesh *m)
+{
+    for (int a = 0; a < 3; a++) {
+        m->bounds_min[a] = FLT_MAX;
+        m->bounds_max[a] = -FLT_MAX;
+    }
+    for (size_t i = 0; i < (size_t)m->tri_count * 3; i++)
+        for (int a = 0; a < 3; a++) {
+            float v = m->positions[i * 3 + a];
+            if (v < m->bounds_min[a]) m->bounds_min[a] = v;
+            if (v > m->bounds_max[a]) m->bounds_max[a] = v;
+        }
+}
+
+static uint32_t rng_state = 12345u;
+static float frand(void) /* [0, 1), deterministic */
+{
+    rng_state = rng_state * 1664525u + 1013904223u;
+    return (float)(rng_state >> 8) / 16777216.0f;
+}
+
+static mesh make_random(core *c, uint32_t n)
+{
+    mesh m = test_mesh_new(c, n);
+    for (uint32_t i = 0; i < n; i++) {
+        float x = frand() * 10.0f, y = frand() * 10.0f, z = frand() * 10.0f;
+        set_tri(&m, i, x, y, z, x + frand() * 0.5f, y + frand() * 0.5f, z, x, y + frand() * 0.5f, z + frand() * 0.5f);
+    }
+    update_bounds(&m);
+    return m;
+}
+
+/* ---- checks shared by the tests ------------------------------------------------------ */
+
+static void box_of_tris(const bvh *b, const mesh *m, uint32_t first, uint32_t count, float *bmin, float *bmax)
+{
+    for (int a = 0; a < 3; a++) {
+        bmin[a] = FLT_MAX;
+        bmax[a] = -FLT_MAX;
+    }
+    for (uint32_t k = first; k < first + count; k++) {
+        const float *p = m->positions + (size_t)b->tri_order[k] * 9;
+        for (int v = 0; v < 9; v++) {
+            if (p[v] < bmin[v % 3]) bmin[v % 3] = p[v];
+            if (p[v] > bmax[v % 3]) bmax[v % 3] = p[v];
+        }
+    }
+}
+
+static bool same_box(const vkrt_gpu_node *n, const float *bmin, const float *bmax)
+{
+    return n->bmin.x == bmin[0] && n->bmin.y == bmin[1] && n->bmin.z == bmin[2] && n->bmax.x == bmax[0] &&
+           n->bmax.y == bmax[1] && n->bmax.z == bmax[2];
+}
+
+/* Every leaf box is exactly the bounds of its triangles' corners and every interior box
+ * exactly the union of its children's, so by induction every box is exact. */
+static void check_exact_boxes(const char *what, const bvh *b, const mesh *m)
+{
+    int reported = 0;
+    for (uint32_t i = 0; i < b->node_count && reported < 3; i++) {
+        const vkrt_gpu_node *n = &b->nodes[i];
+        float bmin[3], bmax[3];
+        if (n->tri_count) {
+            box_of_tris(b, m, n->left_first, n->tri_count, bmin, bmax);
+        } else {
+            const vkrt_gpu_node *l = &b->nodes[n->left_first], *r = &b->nodes[n->left_first + 1];
+            bmin[0] = fminf(l->bmin.x, r->bmin.x), bmin[1] = fminf(l->bmin.y, r->bmin.y), bmin[2] = fminf(l->bmin.z, r->bmin.z);
+            bmax[0] = fmaxf(l->bmax.x, r->bmax.x), bmax[1] = fmaxf(l->bmax.y, r->bmax.y), bmax[2] = fmaxf(l->bmax.z, r->bmax.z);
+        }
+        bool ok = same_box(n, bmin, bmax);
+        CHECK_MSG(ok, "%s: node %u box is not the exact bounds of its contents", what, i);
+        if (!ok) reported++;
+    }
+}
+
+/* Statistics agree with a direct count over the node array. */
+static void check_stats(const char *what, const bvh *b, const bvh_stats *s)
+{
+    uint64_t leaves = 0, tris = 0, hist[VKRT_LEAF_HISTOGRAM_BINS] = { 0 };
+    uint32_t max_leaf = 0;
+    for (uint32_t i = 0; i < b->node_count; i++) {
+        uint32_t t = b->nodes[i].tri_count;
+        if (!t) continue;
+        leaves++;
+        tris += t;
+        if (t > max_leaf) max_leaf = t;
+        hist[t < VKRT_LEAF_HISTOGRAM_BINS ? t - 1 : VKRT_LEAF_HISTOGRAM_BINS - 1]++;
+    }
+    uint64_t hist_sum = 0;
+    for (int i = 0; i < VKRT_LEAF_HISTOGRAM_BINS; i++) {
+        hist_sum += s->leaf_histogram[i];
+        CHECK_MSG(s->leaf_histogram[i] == hist[i], "%s: histogram bin %d is %llu, counted %llu", what, i,
+                  (unsigned long long)s->leaf_histogram[i], (unsigned long long)hist[i]);
+    }
+    CHECK_MSG(hist_sum == s->leaves, "%s: histogram sums to %llu, leaves %llu", what, (unsigned long long)hist_sum,
+              (unsigned long long)s->leaves);
+    CHECK_MSG(s->leaves == leaves, "%s: stats leaves %llu, counted %llu", what, (unsigned long long)s->leaves,
+              (unsigned long long)leaves);
+    CHECK_MSG(tris == b->tri_count, "%s: leaves hold %llu triangles, mesh %u", what, (unsigned long long)tris, b->tri_count);
+    CHECK_MSG(s->nodes == 2 * s->leaves - 1, "%s: %llu nodes for %llu leaves", what, (unsigned long long)s->nodes,
+              (unsigned long long)s->leaves);
+    CHECK_MSG(s->nodes == b->node_count, "%s: stats nodes %llu, node_count %u", what, (unsigned long long)s->nodes,
+              b->node_count);
+    CHECK_MSG(s->depth == b->depth, "%s: stats depth %u, bvh depth %u", what, s->depth, b->depth);
+    CHECK_MSG(s->max_leaf_triangles == max_leaf, "%s: max leaf %u, counted %u", what, s->max_leaf_triangles, max_leaf);
+    CHECK_MSG(b->depth <= VKRT_MAX_BVH_DEPTH, "%s: depth %u", what, b->depth);
+    CHECK_MSG(isfinite(s->sah_cost) && s->sah_cost >= 1.0 - 1e-9 * (double)s->nodes, "%s: SAH cost %g", what, s->sah_cost);
+}
+
+/* Builds, validates, checks boxes and statistics; the tree is left in *out (destroy it). */
+static vkrt_result build_checked(core *c, const char *what, const mesh *m, vkrt_bvh_builder builder,
+                                 uint32_t max_leaf, bvh *out, bvh_stats *stats)
+{
+    vkrt_result r = bvh_build(c, m, &(bvh_build_desc){ .builder = builder, .max_leaf_size = max_leaf }, out);
+    CHECK_MSG(r == VKRT_OK, "%s: bvh_build: %s (%s)", what, vkrt_result_string(r), c->last_error);
+    if (r != VKRT_OK) return r;
+    char message[512];
+    bool valid = bvh_validate(out, m, message, sizeof message);
+    CHECK_MSG(valid, "%s: %s", what, message);
+    CHECK_MSG(out->build_ms >= 0.0, "%s: build_ms %g", what, out->build_ms);
+    if (valid) {
+        check_exact_boxes(what, out, m);
+        bvh_compute_stats(out, stats);
+        check_stats(what, out, stats);
+    } else {
+        memset(stats, 0, sizeof *stats);
+    }
+    return r;
+}
+
+/* The SAH builder leaves more than max_leaf triangles in a leaf only where no split exists
+ * (all centroids equal, the centres of the triangles' boxes) or at the depth cap. */
+static void check_leaf_limit(const char *what, const bvh *b, const mesh *m, uint32_t max_leaf)
+{
+    int reported = 0;
+    struct { uint32_t node, depth; } stack[2 * (VKRT_MAX_BVH_DEPTH + 2)];
+    uint32_t sp = 0;
+    stack[sp].node = 0;
+    stack[sp++].depth = 0;
+    while (sp && reported < 3) {
+        sp--;
+        uint32_t i = stack[sp].node, depth = stack[sp].depth;
+        const vkrt_gpu_node *n = &b->nodes[i];
+        if (!n->tri_count) {
+            stack[sp].node = n->left_first;
+            stack[sp++].depth = depth + 1;
+            stack[sp].node = n->left_first + 1;
+            stack[sp++].depth = depth + 1;
+            continue;
+        }
+        if (n->tri_count <= max_leaf || depth == VKRT_MAX_BVH_DEPTH) continue;
+        float c0[3] = { 0 };
+        bool all_equal = true;
+        for (uint32_t k = n->left_first; k < n->left_first + n->tri_count; k++) {
+            float bmin[3], bmax[3];
+            box_of_tris(b, m, k, 1, bmin, bmax);
+            for (int a = 0; a < 3; a++) {
+                float cen = 0.5f * (bmin[a] + bmax[a]);
+                if (k == n->left_first) c0[a] = cen;
+                else if (cen != c0[a]) all_equal = false;
+            }
+        }
+        CHECK_MSG(all_equal, "%s: leaf %u holds %u > %u triangles that a split could separate", what, i,
+                  n->tri_count, max_leaf);
+        if (!all_equal) reported++;
+    }
+}
+
+/* ---- allocator that counts and fails on request ------------------------------------- */
+
+typedef struct counting {
+    uint64_t calls, allocs, frees;
+    uint64_t fail_at; /* 0: never; else the call number that returns NULL */
+} counting;
+
+static void *counting_alloc(void *user, size_t size)
+{
+    counting *k = user;
+    k->calls++;
+    if (k->fail_at && k->calls == k->fail_at) return NULL;
+    void *p = malloc(size);
+    if (p) k->allocs++;
+    return p;
+}
+
+static void counting_free(void *user, void *p)
+{
+    counting *k = user;
+    k->frees++;
+    free(p);
+}
+
+/* ---- tests --------------------------------------------------------------------------- */
+
+static void bvh_empty_mesh_is_empty_scene(void)
+{
+    core c;
+    core_init(&c, NULL, NULL, NULL);
+    mesh m = { 0 };
+    for (int b = 0; b < BUILDER_COUNT; b++) {
+        bvh out;
+        memset(&out, 0xab, sizeof out);
+        vkrt_result r = bvh_build(&c, &m, &(bvh_build_desc){ .builder = builders[b] }, &out);
+        CHECK_MSG(r == VKRT_ERROR_EMPTY_SCENE, "%s: %s", builder_names[b], vkrt_result_string(r));
+        CHECK(out.nodes == NULL && out.tri_order == NULL && out.node_count == 0);
+        CHECK(c.last_error[0] != '\0');
+        bvh_destroy(&c, &out);
+    }
+}
+
+static void bvh_unknown_builder_is_invalid_argument(void)
+{
+    core c;
+    core_init(&c, NULL, NULL, NULL);
+    mesh m = make_random(&c, 10);
+    bvh out;
+    vkrt_result r = bvh_build(&c, &m, &(bvh_build_desc){ .builder = (vkrt_bvh_builder)77 }, &out);
+    CHECK(r == VKRT_ERROR_INVALID_ARGUMENT);
+    CHECK(out.nodes == NULL);
+    CHECK(strstr(c.last_error, "builder") != NULL);
+    /* A NULL desc means every default: binned SAH. */
+    r = bvh_build(&c, &m, NULL, &out);
+    CHECK(r == VKRT_OK);
+    bvh_destroy(&c, &out);
+    bvh_destroy(&c, NULL);
+    test_mesh_free(&c, &m);
+}
+
+static void bvh_single_triangle_is_one_leaf_root(void)
+{
+    core c;
+    core_init(&c, NULL, NULL, NULL);
+    mesh m = test_mesh_new(&c, 1);
+    set_tri(&m, 0, 0, 0, 0, 1, 0, 0, 0, 2, 3);
+    for (int b = 0; b < BUILDER_COUNT; b++) {
+        bvh out;
+        bvh_stats s;
+        if (build_checked(&c, builder_names[b], &m, builders[b], 0, &out, &s) != VKRT_OK) continue;
+        CHECK_EQ_U64(out.node_count, 1);
+        CHECK_EQ_U64(out.nodes[0].tri_count, 1);
+        CHECK_EQ_U64(out.nodes[0].left_first, 0);
+        CHECK_EQ_U64(out.depth, 0);
+        CHECK(out.nodes[0].bmin.x == 0 && out.nodes[0].bmin.y == 0 && out.nodes[0].bmin.z == 0);
+        CHECK(out.nodes[0].bmax.x == 1 && out.nodes[0].bmax.y == 2 && out.nodes[0].bmax.z == 3);
+        CHECK_NEAR(s.sah_cost, 1.0, 1e-12);
+        bvh_destroy(&c, &out);
+    }
+    test_mesh_free(&c, &m);
+}
+
+static void bvh_two_triangles_are_valid(void)
+{
+    core c;
+    core_init(&c, NULL, NULL, NULL);
+    mesh m = test_mesh_new(&c, 2);
+    set_tri(&m, 0, 0, 0, 0, 1, 0, 0, 0, 1, 0);
+    set_tri(&m, 1, 5, 0, 0, 6, 0, 0, 5, 1, 0);
+    for (int b = 0; b < BUILDER_COUNT; b++) {
+        bvh out;
+        bvh_stats s;
+        if (build_checked(&c, builder_names[b], &m, builders[b], 0, &out, &s) != VKRT_OK) continue;
+        /* Midpoint always splits distinct centroids; SAH keeps a pair of small far-apart
+         * triangles together only if that were cheaper, which it is not here. */
+        CHECK_EQ_U64(out.node_count, 3);
+        CHECK_EQ_U64(s.leaves, 2);
+        bvh_destroy(&c, &out);
+    }
+    test_mesh_free(&c, &m);
+}
+
+static void bvh_random_10k_is_valid_for_every_builder(void)
+{
+    core c;
+    core_init(&c, NULL, NULL, NULL);
+    mesh m = make_random(&c, 10000);
+    double cost[BUILDER_COUNT] = { 0 };
+    for (int b = 0; b < BUILDER_COUNT; b++) {
+        bvh out;
+        bvh_stats s;
+        if (build_checked(&c, builder_names[b], &m, builders[b], 0, &out, &s) != VKRT_OK) continue;
+        cost[b] = s.sah_cost;
+        if (builders[b] == VKRT_BVH_BUILDER_BINNED_SAH) check_leaf_limit("sah random", &out, &m, 4);
+        else CHECK_EQ_U64(s.max_leaf_triangles, 1);
+        bvh_destroy(&c, &out);
+    }
+    CHECK_MSG(cost[1] <= cost[0], "SAH cost of sah %g > midpoint %g", cost[1], cost[0]);
+    test_mesh_free(&c, &m);
+}
+
+static void bvh_identical_triangles_terminate_in_one_leaf(void)
+{
+    core c;
+    core_init(&c, NULL, NULL, NULL);
+    mesh m = test_mesh_new(&c, 10000);
+    for (uint32_t i = 0; i < m.tri_count; i++) set_tri(&m, i, 0, 0, 0, 1, 0, 0, 0, 1, 0);
+    for (int b = 0; b < BUILDER_COUNT; b++) {
+        bvh out;
+        bvh_stats s;
+        if (build_checked(&c, builder_names[b], &m, builders[b], 0, &out, &s) != VKRT_OK) continue;
+        /* No plane separates equal centroids, so splitting would only add overlapping boxes. */
+        CHECK_EQ_U64(out.node_count, 1);
+        CHECK_EQ_U64(s.max_leaf_triangles, 10000);
+        CHECK(out.depth <= VKRT_MAX_BVH_DEPTH);
+        bvh_destroy(&c, &out);
+    }
+    test_mesh_free(&c, &m);
+}
+
+static void bvh_degenerate_triangles_are_valid(void)
+{
+    core c;
+    core_init(&c, NULL, NULL, NULL);
+    /* Points (all three corners equal), collinear corners along random directions, and a
+     * line of collinear triangles along x whose boxes all have zero area. */
+    mesh m = test_mesh_new(&c, 6000);
+    for (uint32_t i = 0; i < 2000; i++) {
+        float x = frand(), y = frand(), z = frand();
+        set_tri(&m, i, x, y, z, x, y, z, x, y, z);
+    }
+    for (uint32_t i = 2000; i < 4000; i++) {
+        float x = frand(), y = frand(), z = frand(), dx = frand(), dy = frand(), dz = frand();
+        set_tri(&m, i, x, y, z, x + dx, y + dy, z + dz, x + 2 * dx, y + 2 * dy, z + 2 * dz);
+    }
+    for (uint32_t i = 4000; i < 6000; i++) {
+        float x = (float)i;
+        set_tri(&m, i, x, 0, 0, x + 0.5f, 0, 0, x + 2.0f, 0, 0);
+    }
+    mesh line = test_mesh_new(&c, 2000);
+    memcpy(line.positions, m.positions + 4000 * 9, 2000 * 9 * sizeof(float));
+    const mesh *meshes[] = { &m, &line };
+    for (int k = 0; k < 2; k++) {
+        for (int b = 0; b < BUILDER_COUNT; b++) {
+            char what[64];
+            snprintf(what, sizeof what, "%s %s", builder_names[b], k ? "zero-area line" : "degenerate mix");
+            bvh out;
+            bvh_stats s;
+            if (build_checked(&c, what, meshes[k], builders[b], 0, &out, &s) != VKRT_OK) continue;
+            if (builders[b] == VKRT_BVH_BUILDER_BINNED_SAH) check_leaf_limit(what, &out, meshes[k], 4);
+            /* Every candidate costs zero on the line; ties go to the balanced split. */
+            if (k == 1) CHECK_MSG(out.depth <= 16, "%s: depth %u", what, out.depth);
+            bvh_destroy(&c, &out);
+        }
+    }
+    test_mesh_free(&c, &line);
+    test_mesh_free(&c, &m);
+}
+
+static void bvh_flat_grid_is_valid(void)
+{
+    core c;
+    core_init(&c, NULL, NULL, NULL);
+    /* 100 x 100 quads in the plane z = 0: every box has zero thickness. */
+    mesh m = test_mesh_new(&c, 2 * 100 * 100);
+    uint32_t t = 0;
+    for (int y = 0; y < 100; y++)
+        for (int x = 0; x < 100; x++) {
+            float x0 = (float)x, y0 = (float)y, x1 = x0 + 1, y1 = y0 + 1;
+            set_tri(&m, t++, x0, y0, 0, x1, y0, 0, x1, y1, 0);
+            set_tri(&m, t++, x0, y0, 0, x1, y1, 0, x0, y1, 0);
+        }
+    for (int b = 0; b < BUILDER_COUNT; b++) {
+        bvh out;
+        bvh_stats s;
+        if (build_checked(&c, builder_names[b], &m, builders[b], 0, &out, &s) != VKRT_OK) continue;
+        CHECK(out.nodes[0].bmin.z == 0 && out.nodes[0].bmax.z == 0);
+        if (builders[b] == VKRT_BVH_BUILDER_BINNED_SAH) check_leaf_limit("sah grid", &out, &m, 4);
+        bvh_destroy(&c, &out);
+    }
+    test_mesh_free(&c, &m);
+}
+
+static void bvh_fan_of_100k_is_valid(void)
+{
+    core c;
+    core_init(&c, NULL, NULL, NULL);
+    /* Every triangle shares the origin, so every box overlaps every other. */
+    uint32_t n = 100000;
+    mesh m = test_mesh_new(&c, n);
+    for (uint32_t i = 0; i < n; i++) {
+        double a0 = 6.283185307179586 * i / n, a1 = 6.283185307179586 * (i + 1) / n;
+        set_tri(&m, i, 0, 0, 0, (float)cos(a0), (float)sin(a0), 0, (float)cos(a1), (float)sin(a1), 0);
+    }
+    for (int b = 0; b < BUILDER_COUNT; b++) {
+        bvh out;
+        bvh_stats s;
+        if (build_checked(&c, builder_names[b], &m, builders[b], 0, &out, &s) != VKRT_OK) continue;
+        if (builders[b] == VKRT_BVH_BUILDER_BINNED_SAH) check_leaf_limit("sah fan", &out, &m, 4);
+        bvh_destroy(&c, &out);
+    }
+    test_mesh_free(&c, &m);
+}
+
+static void bvh_depth_is_capped(void)
+{
+    core c;
+    core_init(&c, NULL, NULL, NULL);
+    /* Point triangles at 2^(58 - 5i) along x and, as many, along y: each centroid is 1/32 of
+     * the next, so the midpoint split and all 32 SAH bins but the last see only the farthest
+     * point apart from the rest. Both builders peel one triangle per level, and an uncapped
+     * tree would be 79 deep. */
+    uint32_t n = 80;
+    mesh m = test_mesh_new(&c, n);
+    for (uint32_t i = 0; i < n / 2; i++) {
+        float v = ldexpf(1.0f, 58 - 5 * (int)i);
+        set_tri(&m, 2 * i, v, 0, 0, v, 0, 0, v, 0, 0);
+        set_tri(&m, 2 * i + 1, 0, v, 0, 0, v, 0, 0, v, 0);
+    }
+    for (int b = 0; b < BUILDER_COUNT; b++) {
+        bvh out;
+        bvh_stats s;
+        if (build_checked(&c, builder_names[b], &m, builders[b], 1, &out, &s) != VKRT_OK) continue;
+        CHECK_MSG(out.depth == VKRT_MAX_BVH_DEPTH, "%s: depth %u", builder_names[b], out.depth);
+        CHECK(s.max_leaf_triangles > 1);
+        bvh_destroy(&c, &out);
+    }
+    test_mesh_free(&c, &m);
+}
+
+static void bvh_sah_splits_centroids_too_close_to_bin(void)
+{
+    core c;
+    core_init(&c, NULL, NULL, NULL);
+    /* Centroids one denormal apart: the bin scale 32 / extent overflows to infinity, so
+     * binning cannot separate them and the median fallback must. */
+    uint32_t n = 100;
+    mesh m = test_mesh_new(&c, n);
+    for (uint32_t i = 0; i < n; i++) {
+        float x = (float)i * FLT_TRUE_MIN;
+        set_tri(&m, i, x, 0, 0, x, 1, 0, x, 0, 1);
+    }
+    for (int b = 0; b < BUILDER_COUNT; b++) {
+        bvh out;
+        bvh_stats s;
+        if (build_checked(&c, builder_names[b], &m, builders[b], 4, &out, &s) != VKRT_OK) continue;
+        if (builders[b] == VKRT_BVH_BUILDER_BINNED_SAH) {
+            check_leaf_limit("sah denormal", &out, &m, 4);
+            CHECK(s.max_leaf_triangles <= 4);
+        }
+        bvh_destroy(&c, &out);
+    }
+    test_mesh_free(&c, &m);
+}
+
+static void bvh_sah_respects_max_leaf_size(void)
+{
+    core c;
+    core_init(&c, NULL, NULL, NULL);
+    mesh m = make_random(&c, 5000);
+    /* Mixed in: 50 copies of one triangle, which no split can separate. */
+    mesh dup = make_random(&c, 5050);
+    for (uint32_t i = 5000; i < 5050; i++) set_tri(&dup, i, 3, 3, 3, 4, 3, 3, 3, 4, 3);
+    const uint32_t limits[] = { 1, 2, 3, 4, 8, 16, 100 };
+    for (size_t l = 0; l < sizeof limits / sizeof limits[0]; l++) {
+        const mesh *meshes[] = { &m, &dup };
+        for (int k = 0; k < 2; k++) {
+            char what[64];
+            snprintf(what, sizeof what, "sah max_leaf %u%s", limits[l], k ? " with duplicates" : "");
+            bvh out;
+            bvh_stats s;
+            if (build_checked(&c, what, meshes[k], VKRT_BVH_BUILDER_BINNED_SAH, limits[l], &out, &s) != VKRT_OK) continue;
+            check_leaf_limit(what, &out, meshes[k], limits[l]);
+            if (k == 0) CHECK_MSG(s.max_leaf_triangles <= limits[l], "%s: max leaf %u", what, s.max_leaf_triangles);
+            else CHECK_MSG(s.max_leaf_triangles >= 50, "%s: max leaf %u", what, s.max_leaf_triangles);
+            bvh_destroy(&c, &out);
+        }
+    }
+    test_mesh_free(&c, &dup);
+    test_mesh_free(&c, &m);
+}
+
+typedef struct progress_log {
+    int calls, cancel_at; /* cancel_at: the call (1-based) that returns false; 0 never */
+    float last;
+    bool in_order;
+} progress_log;
+
+static bool progress_cb(void *user, const char *stage, float fraction)
+{
+    progress_log *p = user;
+    p->calls++;
+    if (!(fraction >= p->last && fraction <= 1.0f) || !stage) p->in_order = false;
+    p->last = fraction;
+    return p->cancel_at == 0 || p->calls < p->cancel_at;
+}
+
+static void bvh_progress_runs_from_zero_to_one(void)
+{
+    core c;
+    core_init(&c, NULL, NULL, NULL);
+    mesh m = make_random(&c, 20000);
+    for (int b = 0; b < BUILDER_COUNT; b++) {
+        progress_log p = { .in_order = true };
+        bvh out;
+        vkrt_result r = bvh_build(&c, &m, &(bvh_build_desc){ .builder = builders[b], .progress = progress_cb, .progress_user = &p }, &out);
+        CHECK(r == VKRT_OK);
+        CHECK_MSG(p.calls >= 3 && p.calls <= 200, "%s: %d progress calls", builder_names[b], p.calls);
+        CHECK_MSG(p.in_order, "%s: fractions out of order", builder_names[b]);
+        CHECK_MSG(p.last == 1.0f, "%s: last fraction %g", builder_names[b], p.last);
+        bvh_destroy(&c, &out);
+    }
+    test_mesh_free(&c, &m);
+}
+
+static void bvh_progress_false_cancels_without_leak(void)
+{
+    counting k = { 0 };
+    core c;
+    core_init(&c, &(vkrt_allocator){ counting_alloc, counting_free, &k }, NULL, NULL);
+    mesh m = make_random(&c, 3000);
+    for (int b = 0; b < BUILDER_COUNT; b++) {
+        /* Cancel at each call in turn until the build finishes first. */
+        for (int at = 1;; at++) {
+            uint64_t allocs = k.allocs, frees = k.frees;
+            progress_log p = { .cancel_at = at, .in_order = true };
+            bvh out;
+            vkrt_result r = bvh_build(&c, &m, &(bvh_build_desc){ .builder = builders[b], .progress = progress_cb, .progress_user = &p }, &out);
+            if (p.calls < at) {
+                CHECK(r == VKRT_OK);
+                bvh_destroy(&c, &out);
+                CHECK_EQ_U64(k.allocs - allocs, k.frees - frees);
+                CHECK_MSG(at > 3, "%s: only %d progress calls", builder_names[b], at - 1);
+                break;
+            }
+            CHECK_MSG(r == VKRT_ERROR_CANCELLED, "%s cancel at %d: %s", builder_names[b], at, vkrt_result_string(r));
+            CHECK(strstr(c.last_error, "cancelled") != NULL);
+            CHECK(out.nodes == NULL && out.tri_order == NULL);
+            CHECK_EQ_U64(k.allocs - allocs, k.frees - frees);
+            if (r == VKRT_OK) bvh_destroy(&c, &out);
+            if (at > 1000) break;
+        }
+    }
+    test_mesh_free(&c, &m);
+    CHECK_EQ_U64(k.allocs, k.frees);
+}
+
+static void bvh_out_of_memory_at_every_allocation_without_leak(void)
+{
+    counting k = { 0 };
+    core c;
+    core_init(&c, &(vkrt_allocator){ counting_alloc, counting_free, &k }, NULL, NULL);
+    mesh m = make_random(&c, 2000);
+    for (int b = 0; b < BUILDER_COUNT; b++) {
+        int failures = 0;
+        for (uint64_t n = 1;; n++) {
+            uint64_t allocs = k.allocs, frees = k.frees;
+            k.calls = 0;
+            k.fail_at = n;
+            bvh out;
+            vkrt_result r = bvh_build(&c, &m, &(bvh_build_desc){ .builder = builders[b] }, &out);
+            k.fail_at = 0;
+            if (r == VKRT_OK) {
+                char message[256];
+                CHECK_MSG(bvh_validate(&out, &m, message, sizeof message), "%s after failing allocation %llu: %s",
+                          builder_names[b], (unsigned long long)n, message);
+                bvh_destroy(&c, &out);
+                CHECK_EQ_U64(k.allocs - allocs, k.frees - frees);
+                /* Success only once the failing call is past every allocation of the build
+                 * (the final shrink of the node array may fail harmlessly). */
+                if (k.calls < n) break;
+                continue;
+            }
+            failures++;
+            CHECK_MSG(r == VKRT_ERROR_OUT_OF_MEMORY, "%s failing allocation %llu: %s", builder_names[b],
+                      (unsigned long long)n, vkrt_result_string(r));
+            CHECK(out.nodes == NULL && out.tri_order == NULL);
+            CHECK(strstr(c.last_error, "out of memory") != NULL);
+            CHECK_EQ_U64(k.allocs - allocs, k.frees - frees);
+            if (n > 100) {
+                CHECK_MSG(0, "%s: still failing after 100 allocations", builder_names[b]);
+                break;
+            }
+        }
+        CHECK_MSG(failures >= 3, "%s: only %d allocations could fail", builder_names[b], failures);
+    }
+    test_mesh_free(&c, &m);
+    CHECK_EQ_U64(k.allocs, k.frees);
+}
+
+static void bvh_validate_reports_broken_trees(void)
+{
+    core c;
+    core_init(&c, NULL, NULL, NULL);
+    mesh m = make_random(&c, 200);
+    bvh b;
+    CHECK(bvh_build(&c, &m, &(bvh_build_desc){ .builder = VKRT_BVH_BUILDER_MIDPOINT }, &b) == VKRT_OK);
+    char msg[512];
+    CHECK(bvh_validate(&b, &m, msg, sizeof msg));
+    uint32_t leaf = 0, interior = 0;
+    for (uint32_t i = b.node_count - 1; i > 0; i--) {
+        if (b.nodes[i].tri_count) leaf = i;
+        else if (!interior) interior = i;
+    }
+    CHECK(leaf && interior && b.nodes[0].tri_count == 0);
+
+    uint32_t saved = b.tri_order[0];
+    b.tri_order[0] = b.tri_order[1];
+    CHECK(!bvh_validate(&b, &m, msg, sizeof msg) && strstr(msg, "appears twice"));
+    b.tri_order[0] = saved;
+
+    vkrt_gpu_node node = b.nodes[leaf];
+    b.nodes[leaf].bmax.x = b.nodes[0].bmax.x + 1.0f;
+    CHECK(!bvh_validate(&b, &m, msg, sizeof msg) && strstr(msg, "not inside parent"));
+    b.nodes[leaf] = node;
+
+    b.nodes[leaf].bmax.x = b.nodes[leaf].bmin.x;
+    CHECK(!bvh_validate(&b, &m, msg, sizeof msg) && strstr(msg, "misses corner"));
+    b.nodes[leaf] = node;
+
+    b.nodes[leaf].tri_count++;
+    CHECK(!bvh_validate(&b, &m, msg, sizeof msg) && (strstr(msg, "two leaves") || strstr(msg, "beyond")));
+    b.nodes[leaf] = node;
+
+    node = b.nodes[interior];
+    b.nodes[interior].left_first = b.node_count - 1;
+    CHECK(!bvh_validate(&b, &m, msg, sizeof msg) && strstr(msg, "outside"));
+    b.nodes[interior].left_first = b.nodes[0].left_first;
+    CHECK(!bvh_validate(&b, &m, msg, sizeof msg) && (strstr(msg, "reached twice") || strstr(msg, "not inside")));
+    b.nodes[interior] = node;
+
+    b.depth++;
+    CHECK(!bvh_validate(&b, &m, msg, sizeof msg) && strstr(msg, "deep"));
+    b.depth--;
+    CHECK(bvh_validate(&b, &m, msg, sizeof msg));
+    bvh_destroy(&c, &b);
+    test_mesh_free(&c, &m);
+}
+
+static bool has_suffix(const char *s, const char *suffix)
+{
+    size_t n = strlen(s), k = strlen(suffix);
+    return n >= k && strcmp(s + n - k, suffix) == 0;
+}
+
+static void bvh_shared_models_are_valid_and_sah_is_cheaper(void)
+{
+    const char *dir_path = VKRT_MODELS_DIR "/meshes";
+    DIR *dir = opendir(dir_path);
+    CHECK_MSG(dir != NULL, "cannot open %s", dir_path);
+    if (!dir) return;
+    int tested = 0;
+    struct dirent *e;
+    while ((e = readdir(dir)) != NULL) {
+        if (!has_suffix(e->d_name, ".obj") && !has_suffix(e->d_name, ".glb")) continue;
+        char path[1024];
+        snprintf(path, sizeof path, "%s/%s", dir_path, e->d_name);
+        core c;
+        core_init(&c, NULL, NULL, NULL);
+        mesh m = { 0 };
+        vkrt_result r = mesh_load(&c, path, &m);
+        CHECK_MSG(r == VKRT_OK, "%s: %s (%s)", path, vkrt_result_string(r), c.last_error);
+        if (r != VKRT_OK) continue;
+        double cost[BUILDER_COUNT] = { 0 }, ms[BUILDER_COUNT] = { 0 };
+        uint32_t depth[BUILDER_COUNT] = { 0 };
+        for (int b = 0; b < BUILDER_COUNT; b++) {
+            char what[1100];
+            snprintf(what, sizeof what, "%s %s", builder_names[b], e->d_name);
+            bvh out;
+            bvh_stats s;
+            if (build_checked(&c, what, &m, builders[b], 0, &out, &s) != VKRT_OK) continue;
+            if (builders[b] == VKRT_BVH_BUILDER_BINNED_SAH) check_leaf_limit(what, &out, &m, 4);
+            cost[b] = s.sah_cost;
+            ms[b] = out.build_ms;
+            depth[b] = out.depth;
+            bvh_destroy(&c, &out);
+        }
+        CHECK_MSG(cost[1] <= cost[0], "%s: SAH cost of sah %g > midpoint %g", e->d_name, cost[1], cost[0]);
+        fprintf(stderr, "  %-24s %8u tris  midpoint: SAH %7.2f depth %2u %8.1f ms  sah: SAH %7.2f depth %2u %8.1f ms\n",
+                e->d_name, m.tri_count, cost[0], depth[0], ms[0], cost[1], depth[1], ms[1]);
+        mesh_destroy(&c, &m);
+        tested++;
+    }
+    closedir(dir);
+    CHECK_MSG(tested >= 10, "only %d meshes found in %s", tested, dir_path);
+}
+
+int main(void)
+{
+    RUN(bvh_empty_mesh_is_empty_scene);
+    RUN(bvh_unknown_builder_is_invalid_argument);
+    RUN(bvh_single_triangle_is_one_leaf_root);
+    RUN(bvh_two_triangles_are_valid);
+    RUN(bvh_random_10k_is_valid_for_every_builder);
+    RUN(bvh_identical_triangles_terminate_in_one_leaf);
+    RUN(bvh_degenerate_triangles_are_valid);
+    RUN(bvh_flat_grid_is_valid);
+    RUN(bvh_fan_of_100k_is_valid);
+    RUN(bvh_depth_is_capped);
+    RUN(bvh_sah_splits_centroids_too_close_to_bin);
+    RUN(bvh_sah_respects_max_leaf_size);
+    RUN(bvh_progress_runs_from_zero_to_one);
+    RUN(bvh_progress_false_cancels_without_leak);
+    RUN(bvh_out_of_memory_at_every_allocation_without_leak);
+    RUN(bvh_validate_reports_broken_trees);
+    RUN(bvh_shared_models_are_valid_and_sah_is_cheaper);
+    return check_exit();
+}

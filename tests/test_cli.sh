@@ -1,0 +1,126 @@
+#!/usr/bin/env bash
+# The vkrt command line on the Vulkan device with the validation layer on: renders and their
+# files, `info` and `devices`, and every kind of bad input answered with a message naming the
+# file, the documented exit code and no output file.
+set -u
+vkrt=${1:?usage: test_cli.sh path/to/vkrt}
+models=../shared/models
+tmp=$(mktemp -d)
+trap 'rm -rf "$tmp"' EXIT
+export VKRT_VALIDATION=1
+passed=0
+failed=0
+
+ok() { passed=$((passed + 1)); echo "ok   $1"; }
+bad() { failed=$((failed + 1)); echo "FAIL $1"; [ -f "$tmp/err" ] && sed 's/^/     | /' "$tmp/err"; }
+
+# expect NAME CODE CMD...: runs CMD, checks its exit code.
+expect() {
+  local name=$1 code=$2
+  shift 2
+  "$@" >"$tmp/out" 2>"$tmp/err"
+  local got=$?
+  if [ "$got" -eq "$code" ]; then ok "$name"; else bad "$name (exit $got, wanted $code)"; fi
+}
+
+# bad_input NAME FILE PATTERN: rendering FILE fails with exit 3, a message naming the file and
+# matching PATTERN, and no output file.
+bad_input() {
+  local name=$1 file=$2 pattern=$3
+  rm -f "$tmp/never.png"
+  "$vkrt" render "$file" -o "$tmp/never.png" --size 16x16 >"$tmp/out" 2>"$tmp/err"
+  local got=$?
+  if [ "$got" -ne 3 ]; then bad "$name: exit $got, wanted 3"; return; fi
+  if ! grep -qF -- "$(basename "$file")" "$tmp/err"; then bad "$name: message does not name the file"; return; fi
+  if ! grep -qiE -- "$pattern" "$tmp/err"; then bad "$name: message does not say /$pattern/"; return; fi
+  if [ -e "$tmp/never.png" ] || ls "$tmp" | grep -q 'never.png'; then bad "$name: an output file was written"; return; fi
+  ok "$name"
+}
+
+png_size() { python3 -c 'import struct,sys; d=open(sys.argv[1],"rb").read(24); assert d[:8]==b"\x89PNG\r\n\x1a\n"; print("%dx%d"%struct.unpack(">II",d[16:24]))' "$1"; }
+
+# --- renders -------------------------------------------------------------------------
+expect "render the built-in scene" 0 "$vkrt" render -o "$tmp/builtin.png" --size 96x64
+if [ -f "$tmp/builtin.png" ] && [ "$(png_size "$tmp/builtin.png")" = "96x64" ]; then ok "built-in PNG is 96x64"; else bad "built-in PNG is 96x64"; fi
+
+for mode in normal depth heatmap id; do
+  expect "render bunny --mode $mode" 0 "$vkrt" render "$models/meshes/bunny.obj" --mode "$mode" -o "$tmp/bunny_$mode.png" --size 48x48
+done
+expect "render heatmap of leaves with the midpoint BVH" 0 "$vkrt" render "$models/meshes/bunny.obj" --mode heatmap --heat leaves --bvh midpoint -o "$tmp/heat.png" --size 32x32
+expect "render glb with camera flags" 0 "$vkrt" render "$models/gltf/draco/Box/Box.glb" --eye 1,1,1.5 --target 0,0,0 --up 0,1,0 --fov 60 -o "$tmp/box.ppm" --size 32x24
+if head -c 2 "$tmp/box.ppm" 2>/dev/null | grep -q P6; then ok "PPM output"; else bad "PPM output"; fi
+
+# id PFM from both backends: identical ids on (nearly) every pixel
+expect "render id PFM on the GPU" 0 "$vkrt" render "$models/meshes/teapot.obj" --mode id -o "$tmp/gpu.pfm" --size 40x40
+expect "render id PFM on the CPU" 0 "$vkrt" render "$models/meshes/teapot.obj" --mode id -o "$tmp/cpu.pfm" --size 40x40 --backend cpu
+if python3 - "$tmp/gpu.pfm" "$tmp/cpu.pfm" <<'PY'
+import struct, sys
+def load(p):
+    d = open(p, "rb").read()
+    head = d.split(b"\n", 3)
+    assert head[0] == b"PF"
+    w, h = map(int, head[1].split())
+    px = struct.unpack("<%df" % (w * h * 3), head[3][: w * h * 12])
+    return w, h, px[0::3]
+wa, ha, a = load(sys.argv[1]); wb, hb, b = load(sys.argv[2])
+assert (wa, ha) == (wb, hb) == (40, 40)
+same = sum(x == y for x, y in zip(a, b))
+assert same >= 0.999 * len(a) - 1, same
+assert any(x >= 0 for x in a) and any(x == -1 for x in a)
+PY
+then ok "GPU and CPU id PFMs agree"; else bad "GPU and CPU id PFMs agree"; fi
+
+# --- info and devices ------------------------------------------------------------------
+"$vkrt" info "$models/meshes/bunny.obj" >"$tmp/info" 2>"$tmp/err"
+if grep -qE '^triangles +3674$' "$tmp/info" && grep -q '^sah cost' "$tmp/info" && grep -q '^leaf sizes' "$tmp/info" \
+   && grep -q '^build' "$tmp/info" && grep -q '^bytes' "$tmp/info" && grep -q '^depth' "$tmp/info"; then
+  ok "info prints triangles, depth, SAH cost, leaf sizes, build time, bytes"
+else bad "info output"; cat "$tmp/info"; fi
+"$vkrt" devices >"$tmp/devices" 2>"$tmp/err"
+if grep -qE '^0: ' "$tmp/devices"; then ok "devices lists a device"; else bad "devices lists a device"; fi
+expect "render on --device 0" 0 "$vkrt" render --device 0 -o "$tmp/d0.png" --size 16x16
+expect "--device out of range" 4 "$vkrt" render --device 99 -o "$tmp/d99.png" --size 16x16
+[ ! -e "$tmp/d99.png" ] && ok "no file after a device error" || bad "no file after a device error"
+
+# --- usage errors -------------------------------------------------------------------------
+expect "--help" 0 "$vkrt" render --help
+expect "unknown option" 2 "$vkrt" render --frobnicate
+expect "unknown mode" 2 "$vkrt" render --mode sepia
+expect "bad size" 2 "$vkrt" render --size 0x10
+expect "bad fov" 2 "$vkrt" render --fov 180
+expect "unknown command" 2 "$vkrt" paint
+expect "unknown output format" 2 "$vkrt" render -o "$tmp/out.bmp" --size 8x8
+[ ! -e "$tmp/out.bmp" ] && ok "no file for an unknown format" || bad "no file for an unknown format"
+
+# --- bad inputs -------------------------------------------------------------------------
+bad_input "missing file" "$tmp/does_not_exist.obj" "no such file|cannot open|not found"
+head -c 4096 /dev/urandom >"$tmp/garbage.obj"
+printf '\x00\x01\x02' >>"$tmp/garbage.obj"
+bad_input "garbage bytes" "$tmp/garbage.obj" "not an obj|binary|malformed|parse|invalid"
+head -c 4096 /dev/urandom >"$tmp/garbage.glb"
+bad_input "garbage glb" "$tmp/garbage.glb" "gltf|glb|malformed|parse|invalid"
+printf '# nothing here\nv 0 0 0\nv 1 0 0\n' >"$tmp/empty.obj"
+bad_input "empty mesh" "$tmp/empty.obj" "no triangles|empty"
+printf 'v 0 0 0\nv 1 nan 0\nv 0 1 0\nf 1 2 3\n' >"$tmp/nan.obj"
+bad_input "NaN coordinate" "$tmp/nan.obj" "nan|finite"
+printf 'v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 7\n' >"$tmp/index.obj"
+bad_input "index out of range" "$tmp/index.obj" "index|range"
+printf 'v 0 0 0\nv 1 0 0\nv 0 1 0\nl 1 2 3\np 1\n' >"$tmp/lines.obj"
+bad_input "only points and lines" "$tmp/lines.obj" "points|lines"
+cat >"$tmp/draco.gltf" <<'JSON'
+{"asset":{"version":"2.0"},"extensionsUsed":["KHR_draco_mesh_compression"],
+ "extensionsRequired":["KHR_draco_mesh_compression"],
+ "meshes":[{"primitives":[{"attributes":{},"extensions":{"KHR_draco_mesh_compression":{"bufferView":0,"attributes":{"POSITION":0}}}}]}],
+ "nodes":[{"mesh":0}],"scenes":[{"nodes":[0]}],"scene":0}
+JSON
+bad_input "glTF requiring an unsupported extension" "$tmp/draco.gltf" "KHR_draco_mesh_compression"
+cp "$models/gltf/assimp/Mesh_PrimitiveMode/Mesh_PrimitiveMode_00.gltf" "$models/gltf/assimp/Mesh_PrimitiveMode/Mesh_PrimitiveMode_00.bin" "$tmp/"
+bad_input "glTF with only points" "$tmp/Mesh_PrimitiveMode_00.gltf" "points|lines|no triangles"
+
+# an existing output is not replaced by a failed render
+echo keep >"$tmp/keep.png"
+"$vkrt" render "$tmp/nan.obj" -o "$tmp/keep.png" --size 8x8 >/dev/null 2>&1
+[ "$(cat "$tmp/keep.png")" = keep ] && ok "failed render keeps an existing output" || bad "failed render keeps an existing output"
+
+echo "$passed passed, $failed failed"
+[ "$failed" -eq 0 ]

@@ -1,0 +1,774 @@
+/* The C reference tracer: camera, packing, analytic depths and normals, and the promise that
+ * BVH and naive traversal (and every builder) give bit-identical closest hits. */
+#include <math.h>
+#include <pthread.h>
+#include <stdatomic.h>
+#include <stdbool.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "bvh.h"
+#include "camera.h"
+#include "check.h"
+#include "core.h"
+#include "cpu_trace.h"
+#include "mesh.h"
+#include "scene_pack.h"
+
+static core c;
+
+/* ---- fixtures ---- */
+
+/* A mesh built by hand; normals default to the face normal of each triangle. */
+static mesh mesh_from(const float *positions, const float *normals, uint32_t tri_count)
+{
+    mesh m = { 0 };
+    m.tri_count = tri_count;
+    m.tri_capacity = tri_count;
+    m.positions = core_alloc_array(&c, (size_t)tri_count * 9, sizeof(float));
+    m.normals = core_alloc_array(&c, (size_t)tri_count * 9, sizeof(float));
+    if (!m.positions || !m.normals) abort();
+    memcpy(m.positions, positions, (size_t)tri_count * 9 * sizeof(float));
+    for (uint32_t i = 0; i < tri_count; i++) {
+        const float *p = positions + (size_t)i * 9;
+        float n[3];
+        if (normals) {
+            memcpy(n, normals + (size_t)i * 3, sizeof n);
+        } else {
+            double e1[3] = { p[3] - p[0], p[4] - p[1], p[5] - p[2] };
+            double e2[3] = { p[6] - p[0], p[7] - p[1], p[8] - p[2] };
+            double x = e1[1] * e2[2] - e1[2] * e2[1], y = e1[2] * e2[0] - e1[0] * e2[2],
+                   z = e1[0] * e2[1] - e1[1] * e2[0];
+            double l = sqrt(x * x + y * y + z * z);
+            n[0] = l > 0 ? (float)(x / l) : 0.0f;
+            n[1] = l > 0 ? (float)(y / l) : 0.0f;
+            n[2] = l > 0 ? (float)(z / l) : 1.0f;
+        }
+        for (int k = 0; k < 3; k++) memcpy(m.normals + (size_t)i * 9 + k * 3, n, sizeof n);
+    }
+    for (int a = 0; a < 3; a++) {
+        m.bounds_min[a] = INFINITY;
+        m.bounds_max[a] = -INFINITY;
+    }
+    for (size_t i = 0; i < (size_t)tri_count * 3; i++)
+        for (int a = 0; a < 3; a++) {
+            m.bounds_min[a] = fminf(m.bounds_min[a], m.positions[i * 3 + a]);
+            m.bounds_max[a] = fmaxf(m.bounds_max[a], m.positions[i * 3 + a]);
+        }
+    return m;
+}
+
+static void mesh_free_local(mesh *m)
+{
+    core_free(&c, m->positions);
+    core_free(&c, m->normals);
+    memset(m, 0, sizeof *m);
+}
+
+/* The simplest valid BVH: one leaf root holding every triangle in file order. */
+static void bvh_single_leaf(const mesh *m, bvh *b)
+{
+    memset(b, 0, sizeof *b);
+    b->nodes = core_alloc(&c, sizeof *b->nodes);
+    b->tri_order = core_alloc_array(&c, m->tri_count, sizeof *b->tri_order);
+    if (!b->nodes || !b->tri_order) abort();
+    b->node_count = 1;
+    b->tri_count = m->tri_count;
+    for (uint32_t i = 0; i < m->tri_count; i++) b->tri_order[i] = i;
+    /* From the corners, not m->bounds_*, which a loaded and normalised mesh may not refresh. */
+    float lo[3] = { INFINITY, INFINITY, INFINITY }, hi[3] = { -INFINITY, -INFINITY, -INFINITY };
+    for (size_t i = 0; i < (size_t)m->tri_count * 3; i++)
+        for (int a = 0; a < 3; a++) {
+            lo[a] = fminf(lo[a], m->positions[i * 3 + a]);
+            hi[a] = fmaxf(hi[a], m->positions[i * 3 + a]);
+        }
+    b->nodes[0] = (vkrt_gpu_node){
+        .bmin = { lo[0], lo[1], lo[2] },
+        .bmax = { hi[0], hi[1], hi[2] },
+        .left_first = 0,
+        .tri_count = m->tri_count,
+    };
+}
+
+typedef enum builder_kind { BUILD_SINGLE_LEAF, BUILD_MIDPOINT, BUILD_SAH, BUILD_KINDS } builder_kind;
+static const char *const builder_names[BUILD_KINDS] = { "single-leaf", "midpoint", "sah" };
+
+typedef struct scene {
+    bvh b;
+    vkrt_gpu_tri *tris;
+    bool local_bvh;
+} scene;
+
+static bool scene_make(const mesh *m, builder_kind kind, scene *s)
+{
+    memset(s, 0, sizeof *s);
+    if (kind == BUILD_SINGLE_LEAF) {
+        bvh_single_leaf(m, &s->b);
+        s->local_bvh = true;
+    } else {
+        bvh_build_desc d = { .builder = kind == BUILD_MIDPOINT ? VKRT_BVH_BUILDER_MIDPOINT : VKRT_BVH_BUILDER_BINNED_SAH };
+        vkrt_result r = bvh_build(&c, m, &d, &s->b);
+        CHECK_MSG(r == VKRT_OK, "bvh_build(%s): %s", builder_names[kind], c.last_error);
+        if (r != VKRT_OK) return false;
+        char why[256] = "";
+        CHECK_MSG(bvh_validate(&s->b, m, why, sizeof why), "%s: %s", builder_names[kind], why);
+    }
+    s->tris = core_alloc_array(&c, m->tri_count, sizeof *s->tris);
+    if (!s->tris) abort();
+    scene_pack_triangles(m, &s->b, s->tris);
+    return true;
+}
+
+static void scene_free(scene *s)
+{
+    core_free(&c, s->tris);
+    if (s->local_bvh) {
+        core_free(&c, s->b.nodes);
+        core_free(&c, s->b.tri_order);
+    } else {
+        bvh_destroy(&c, &s->b);
+    }
+    memset(s, 0, sizeof *s);
+}
+
+typedef struct render_opts {
+    vkrt_mode mode;
+    vkrt_traversal traversal;
+    vkrt_heat heat;
+    uint32_t width, height, threads;
+    vkrt_camera camera;
+    vkrt_progress_fn progress;
+    void *progress_user;
+} render_opts;
+
+/* Renders into a new buffer (the caller frees it); *out_result gets cpu_trace_render's code. */
+static float *render_r(const scene *s, render_opts o, vkrt_result *out_result)
+{
+    cpu_trace_params p = {
+        .mode = o.mode ? o.mode : VKRT_MODE_NORMAL,
+        .traversal = o.traversal ? o.traversal : VKRT_TRAVERSAL_BVH,
+        .heat = o.heat ? o.heat : VKRT_HEAT_NODES,
+        .threads = o.threads ? o.threads : 2,
+        .progress = o.progress,
+        .progress_user = o.progress_user,
+    };
+    vkrt_result r = camera_setup(&c, &o.camera, o.width, o.height, &p.camera);
+    CHECK_MSG(r == VKRT_OK, "camera_setup: %s", c.last_error);
+    float *img = calloc((size_t)o.width * o.height * 4, sizeof(float));
+    if (!img) abort();
+    cpu_trace_scene cs = { s->b.nodes, s->b.node_count, s->tris, s->b.tri_count };
+    if (r == VKRT_OK) r = cpu_trace_render(&c, &cs, &p, img);
+    *out_result = r;
+    return img;
+}
+
+static float *render(const scene *s, render_opts o)
+{
+    vkrt_result r;
+    float *img = render_r(s, o, &r);
+    CHECK_MSG(r == VKRT_OK, "cpu_trace_render: %s", c.last_error);
+    return img;
+}
+
+/* The ray of pixel (x, y), in double, from the push constants (what both tracers start from). */
+static void pixel_ray(const vkrt_gpu_push *p, uint32_t x, uint32_t y, double o[3], double d[3])
+{
+    double sx = 2.0 * (x + 0.5) / p->width - 1.0, sy = 1.0 - 2.0 * (y + 0.5) / p->height;
+    double v[3] = { p->forward.x + sx * p->right.x + sy * p->up.x, p->forward.y + sx * p->right.y + sy * p->up.y,
+                    p->forward.z + sx * p->right.z + sy * p->up.z };
+    double l = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+    for (int a = 0; a < 3; a++) d[a] = v[a] / l;
+    o[0] = p->eye.x, o[1] = p->eye.y, o[2] = p->eye.z;
+}
+
+/* An icosphere-like UV sphere plus a ground quad: closed, curved, many equal-distance edges. */
+static mesh make_sphere_scene(uint32_t rings, uint32_t segments)
+{
+    uint32_t n = rings * segments * 2 + 2;
+    float *pos = calloc((size_t)n * 9, sizeof(float));
+    if (!pos) abort();
+    uint32_t k = 0;
+    const double pi = 3.14159265358979323846;
+    for (uint32_t i = 0; i < rings; i++) {
+        double t0 = pi * i / rings, t1 = pi * (i + 1) / rings;
+        for (uint32_t j = 0; j < segments; j++) {
+            double p0 = 2 * pi * j / segments, p1 = 2 * pi * (j + 1) / segments;
+            double q[4][3] = {
+                { sin(t0) * cos(p0), cos(t0), sin(t0) * sin(p0) },
+                { sin(t1) * cos(p0), cos(t1), sin(t1) * sin(p0) },
+                { sin(t1) * cos(p1), cos(t1), sin(t1) * sin(p1) },
+                { sin(t0) * cos(p1), cos(t0), sin(t0) * sin(p1) },
+            };
+            int idx[6] = { 0, 1, 2, 0, 2, 3 };
+            for (int t = 0; t < 6; t++)
+                for (int a = 0; a < 3; a++) pos[(size_t)k * 9 + t * 3 + a] = (float)(0.35 * q[idx[t]][a]);
+            k += 2;
+        }
+    }
+    float ground[18] = { -0.5f, -0.4f, -0.5f, -0.5f, -0.4f, 0.5f, 0.5f, -0.4f, 0.5f,
+                         -0.5f, -0.4f, -0.5f, 0.5f, -0.4f, 0.5f, 0.5f, -0.4f, -0.5f };
+    memcpy(pos + (size_t)k * 9, ground, sizeof ground);
+    mesh m = mesh_from(pos, NULL, n);
+    free(pos);
+    return m;
+}
+
+/* A random triangle soup: overlapping, intersecting and coincident triangles (the last ones
+ * duplicate earlier ones, so ties at equal t must go to the lower prim_id). */
+static mesh make_soup(uint32_t count, uint32_t seed)
+{
+    float *pos = calloc((size_t)count * 9, sizeof(float));
+    if (!pos) abort();
+    uint32_t state = seed;
+    for (uint32_t i = 0; i < count; i++) {
+        if (i >= count - count / 8) {
+            memcpy(pos + (size_t)i * 9, pos + (size_t)(i - count / 2) * 9, 9 * sizeof(float));
+            continue;
+        }
+        float centre[3];
+        for (int a = 0; a < 3; a++) {
+            state = state * 1664525u + 1013904223u;
+            centre[a] = (float)((state >> 8) / 16777216.0 - 0.5) * 0.8f;
+        }
+        for (int v = 0; v < 3; v++)
+            for (int a = 0; a < 3; a++) {
+                state = state * 1664525u + 1013904223u;
+                pos[(size_t)i * 9 + v * 3 + a] = centre[a] + (float)((state >> 8) / 16777216.0 - 0.5) * 0.25f;
+            }
+    }
+    mesh m = mesh_from(pos, NULL, count);
+    free(pos);
+    return m;
+}
+
+static bool load_model(const char *name, mesh *m)
+{
+    char path[512];
+    snprintf(path, sizeof path, "%s/meshes/%s", VKRT_MODELS_DIR, name);
+    memset(m, 0, sizeof *m);
+    vkrt_result r = mesh_load(&c, path, m);
+    CHECK_MSG(r == VKRT_OK, "mesh_load(%s): %s", path, c.last_error);
+    if (r != VKRT_OK) return false;
+    mesh_normalize(m);
+    return true;
+}
+
+static size_t bytes(render_opts o)
+{
+    return (size_t)o.width * o.height * 4 * sizeof(float);
+}
+
+static uint32_t count_hits(const float *id_img, render_opts o)
+{
+    uint32_t n = 0;
+    for (size_t i = 0; i < (size_t)o.width * o.height; i++) n += id_img[i * 4] >= 0.0f;
+    return n;
+}
+
+/* ---- camera ---- */
+
+static void camera_defaults_frame_the_unit_scene(void)
+{
+    vkrt_gpu_push p = { 0 };
+    CHECK(camera_setup(&c, &(vkrt_camera){ 0 }, 64, 32, &p) == VKRT_OK);
+    CHECK(p.eye.x == 0.0f && p.eye.y == 0.0f && p.eye.z == 1.5f);
+    CHECK(p.forward.x == 0.0f && p.forward.y == 0.0f && p.forward.z == -1.0f);
+    double half = tan(22.5 * 3.14159265358979323846 / 180.0);
+    CHECK_NEAR(p.right.x, half * 2.0, 1e-6);
+    CHECK_NEAR(p.right.y, 0.0, 1e-7);
+    CHECK_NEAR(p.up.y, half, 1e-6);
+    CHECK_NEAR(p.up.x, 0.0, 1e-7);
+    CHECK_EQ_U64(p.width, 64);
+    CHECK_EQ_U64(p.height, 32);
+
+    vkrt_gpu_push q = { 0 };
+    CHECK(camera_setup(&c, &(vkrt_camera){ .fov_y_degrees = 45.0f, .up = { 0, 2, 0 }, .eye = { 0, 0, 1.5f } }, 64,
+                       32, &q) == VKRT_OK);
+    CHECK(memcmp(&p, &q, sizeof p) == 0);
+}
+
+static void camera_rejects_bad_input(void)
+{
+    vkrt_gpu_push p = { 0 };
+    CHECK(camera_setup(&c, &(vkrt_camera){ .eye = { NAN, 0, 1 } }, 8, 8, &p) == VKRT_ERROR_INVALID_ARGUMENT);
+    CHECK(camera_setup(&c, &(vkrt_camera){ .target = { 0, INFINITY, 0 } }, 8, 8, &p) ==
+          VKRT_ERROR_INVALID_ARGUMENT);
+    CHECK(camera_setup(&c, &(vkrt_camera){ .up = { 0, NAN, 0 } }, 8, 8, &p) == VKRT_ERROR_INVALID_ARGUMENT);
+    CHECK(camera_setup(&c, &(vkrt_camera){ .fov_y_degrees = NAN }, 8, 8, &p) == VKRT_ERROR_INVALID_ARGUMENT);
+    CHECK(camera_setup(&c, &(vkrt_camera){ .fov_y_degrees = 180.0f }, 8, 8, &p) == VKRT_ERROR_INVALID_ARGUMENT);
+    CHECK(strstr(c.last_error, "fov_y_degrees") != NULL);
+    CHECK(camera_setup(&c, &(vkrt_camera){ .fov_y_degrees = -10.0f }, 8, 8, &p) == VKRT_ERROR_INVALID_ARGUMENT);
+    CHECK(camera_setup(&c, &(vkrt_camera){ .fov_y_degrees = 179.0f }, 8, 8, &p) == VKRT_OK);
+    CHECK(camera_setup(&c, &(vkrt_camera){ .fov_y_degrees = 0.0f }, 8, 8, &p) == VKRT_OK);
+    /* Looking straight down the default up vector. */
+    CHECK(camera_setup(&c, &(vkrt_camera){ .eye = { 0, 2, 0 } }, 8, 8, &p) == VKRT_ERROR_INVALID_ARGUMENT);
+    CHECK(strstr(c.last_error, "up") != NULL);
+    CHECK(camera_setup(&c, &(vkrt_camera){ .eye = { 0, 0, 2 }, .up = { 0, 0, -3 } }, 8, 8, &p) ==
+          VKRT_ERROR_INVALID_ARGUMENT);
+    CHECK(camera_setup(&c, &(vkrt_camera){ 0 }, 0, 8, &p) == VKRT_ERROR_INVALID_ARGUMENT);
+}
+
+/* ---- packing ---- */
+
+static void octahedral_normals_round_trip_within_1e4(void)
+{
+    double worst = 0.0;
+    const uint32_t n = 200000;
+    for (uint32_t i = 0; i < n + 26; i++) {
+        float v[3];
+        if (i < n) { /* Fibonacci sphere: evenly spread over every octant */
+            double z = 1.0 - 2.0 * (i + 0.5) / n, r = sqrt(1.0 - z * z), phi = i * 2.39996322972865332;
+            v[0] = (float)(r * cos(phi)), v[1] = (float)(r * sin(phi)), v[2] = (float)z;
+        } else { /* the axes, face diagonals and corners, where the fold has its seams */
+            int k = (int)(i - n) + ((int)(i - n) >= 13 ? 1 : 0);
+            double d[3] = { k % 3 - 1, (k / 3) % 3 - 1, k / 9 - 1 };
+            double l = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+            for (int a = 0; a < 3; a++) v[a] = (float)(d[a] / l);
+        }
+        float w[3];
+        normal_decode_oct(normal_encode_oct(v), w);
+        double e = sqrt((double)(v[0] - w[0]) * (v[0] - w[0]) + (double)(v[1] - w[1]) * (v[1] - w[1]) +
+                        (double)(v[2] - w[2]) * (v[2] - w[2]));
+        double len = sqrt((double)w[0] * w[0] + (double)w[1] * w[1] + (double)w[2] * w[2]);
+        CHECK_NEAR(len, 1.0, 1e-6);
+        if (e > worst) worst = e;
+    }
+    CHECK_MSG(worst < 1e-4, "worst round-trip error %g", worst);
+    float zero[3] = { 0, 0, 0 }, w[3];
+    normal_decode_oct(normal_encode_oct(zero), w);
+    CHECK(w[0] == 0.0f && w[1] == 0.0f && w[2] == 1.0f);
+}
+
+static void packing_follows_bvh_order_with_face_normals(void)
+{
+    float pos[27] = { 0, 0, 0, 1, 0, 0, 0, 1, 0,      /* +z */
+                      0, 0, 0, 0, 1, 0, 1, 0, 0,      /* -z */
+                      0, 0, 0, 1, 1, 1, 2, 2, 2 };    /* zero area */
+    mesh m = mesh_from(pos, NULL, 3);
+    uint32_t order[3] = { 2, 0, 1 };
+    bvh b = { .tri_order = order, .tri_count = 3 };
+    vkrt_gpu_tri t[3];
+    scene_pack_triangles(&m, &b, t);
+    CHECK_EQ_U64(t[0].prim_id, 2);
+    CHECK_EQ_U64(t[1].prim_id, 0);
+    CHECK_EQ_U64(t[2].prim_id, 1);
+    CHECK(t[1].v1.x == 1.0f && t[1].v2.y == 1.0f);
+    CHECK(t[1].face_n.x == 0.0f && t[1].face_n.y == 0.0f && t[1].face_n.z == 1.0f);
+    CHECK(t[2].face_n.z == -1.0f);
+    CHECK(t[0].face_n.x == 0.0f && t[0].face_n.y == 0.0f && t[0].face_n.z == 0.0f);
+    float n[3];
+    normal_decode_oct(t[2].n1, n);
+    CHECK_NEAR(n[2], -1.0, 1e-6);
+    mesh_free_local(&m);
+}
+
+/* ---- analytic images ---- */
+
+static void single_triangle_gives_analytic_depth_and_exact_ids(void)
+{
+    /* Two triangles off screen first, so the visible one has prim_id 2. */
+    float pos[27] = { 10, 10, 0, 11, 10, 0, 10, 11, 0,
+                      -10, 10, 0, -11, 10, 0, -10, 11, 0,
+                      -0.5f, -0.5f, 0, 0.5f, -0.5f, 0, 0, 0.5f, 0 };
+    mesh m = mesh_from(pos, NULL, 3);
+    for (int k = 0; k < BUILD_KINDS; k++) {
+        scene s;
+        if (!scene_make(&m, (builder_kind)k, &s)) continue;
+        render_opts o = { .mode = VKRT_MODE_DEPTH, .width = 33, .height = 33 };
+        float *depth = render(&s, o);
+        o.mode = VKRT_MODE_ID;
+        float *id = render(&s, o);
+        const float *centre = depth + ((size_t)16 * 33 + 16) * 4;
+        CHECK(centre[0] == 1.5f && centre[3] == 1.0f);
+        const float *cid = id + ((size_t)16 * 33 + 16) * 4;
+        CHECK(cid[0] == 2.0f && cid[3] == 1.0f);
+        CHECK_NEAR(cid[1], 0.25, 1e-6);
+        CHECK_NEAR(cid[2], 0.5, 1e-6);
+
+        vkrt_gpu_push p;
+        camera_setup(&c, &(vkrt_camera){ 0 }, 33, 33, &p);
+        uint32_t hits = 0, wrong = 0;
+        for (uint32_t y = 0; y < 33; y++)
+            for (uint32_t x = 0; x < 33; x++) {
+                double o3[3], d[3];
+                pixel_ray(&p, x, y, o3, d);
+                double t = -o3[2] / d[2];
+                double px = o3[0] + t * d[0], py = o3[1] + t * d[1];
+                /* Inside the triangle by the three edge functions, with a margin for rounding. */
+                double e0 = py + 0.5, e1 = 0.5 - py - 2.0 * (px), e2 = 0.5 - py + 2.0 * px;
+                double inside = fmin(e0, fmin(e1 / sqrt(5.0), e2 / sqrt(5.0)));
+                const float *pd = depth + ((size_t)y * 33 + x) * 4, *pi = id + ((size_t)y * 33 + x) * 4;
+                if (inside > 1e-4) {
+                    hits++;
+                    wrong += pi[0] != 2.0f || pi[3] != 1.0f || fabs(pd[0] - t) > 1e-6 * t;
+                } else if (inside < -1e-4) {
+                    wrong += pi[0] != -1.0f || pi[1] != 0.0f || pi[2] != 0.0f || pi[3] != 0.0f ||
+                             pd[0] != -1.0f || pd[3] != 0.0f;
+                }
+            }
+        CHECK(hits > 100);
+        CHECK_MSG(wrong == 0, "%s: %u pixels disagree with the analytic triangle", builder_names[k], wrong);
+        free(depth);
+        free(id);
+        scene_free(&s);
+    }
+    mesh_free_local(&m);
+}
+
+static mesh make_cube(void)
+{
+    /* Unit cube [-0.5, 0.5]^3, two triangles per face, outward winding. */
+    static const float q[6][4][3] = {
+        { { -.5f, -.5f, .5f }, { .5f, -.5f, .5f }, { .5f, .5f, .5f }, { -.5f, .5f, .5f } },
+        { { .5f, -.5f, -.5f }, { -.5f, -.5f, -.5f }, { -.5f, .5f, -.5f }, { .5f, .5f, -.5f } },
+        { { .5f, -.5f, .5f }, { .5f, -.5f, -.5f }, { .5f, .5f, -.5f }, { .5f, .5f, .5f } },
+        { { -.5f, -.5f, -.5f }, { -.5f, -.5f, .5f }, { -.5f, .5f, .5f }, { -.5f, .5f, -.5f } },
+        { { -.5f, .5f, .5f }, { .5f, .5f, .5f }, { .5f, .5f, -.5f }, { -.5f, .5f, -.5f } },
+        { { -.5f, -.5f, -.5f }, { .5f, -.5f, -.5f }, { .5f, -.5f, .5f }, { -.5f, -.5f, .5f } },
+    };
+    float pos[12 * 9];
+    int idx[6] = { 0, 1, 2, 0, 2, 3 };
+    for (int f = 0; f < 6; f++)
+        for (int t = 0; t < 6; t++)
+            for (int a = 0; a < 3; a++) pos[f * 18 + t * 3 + a] = q[f][idx[t]][a];
+    return mesh_from(pos, NULL, 12);
+}
+
+static void cube_face_gives_analytic_depth(void)
+{
+    mesh m = make_cube();
+    for (int k = 0; k < BUILD_KINDS; k++) {
+        scene s;
+        if (!scene_make(&m, (builder_kind)k, &s)) continue;
+        render_opts o = { .mode = VKRT_MODE_DEPTH, .width = 48, .height = 40, .camera = { .eye = { 0, 0, 3 } } };
+        float *depth = render(&s, o);
+        vkrt_gpu_push p;
+        camera_setup(&c, &o.camera, o.width, o.height, &p);
+        uint32_t checked = 0, wrong = 0, misses_wrong = 0;
+        for (uint32_t y = 0; y < o.height; y++)
+            for (uint32_t x = 0; x < o.width; x++) {
+                double or[3], d[3];
+                pixel_ray(&p, x, y, or, d);
+                double t = (0.5 - or[2]) / d[2];
+                double px = or[0] + t * d[0], py = or[1] + t * d[1];
+                const float *pd = depth + ((size_t)y * o.width + x) * 4;
+                if (fabs(px) < 0.5 - 1e-4 && fabs(py) < 0.5 - 1e-4) {
+                    checked++;
+                    wrong += !(fabs(pd[0] - t) <= 1e-6 * t) || pd[3] != 1.0f;
+                } else if (fabs(px) > 0.5 + 1e-4 || fabs(py) > 0.5 + 1e-4) {
+                    /* From (0, 0, 3) the side faces are hidden: outside the front face is a miss. */
+                    misses_wrong += pd[0] != -1.0f || pd[3] != 0.0f;
+                }
+            }
+        CHECK(checked > 200);
+        CHECK_MSG(wrong == 0 && misses_wrong == 0, "%s: %u hits, %u misses wrong", builder_names[k], wrong,
+                  misses_wrong);
+        free(depth);
+        scene_free(&s);
+    }
+    mesh_free_local(&m);
+}
+
+static void normal_mode_on_a_plane_gives_its_normal(void)
+{
+    /* A large tilted plane (normal (0, 1, 1) / sqrt 2) seen from above and in front. */
+    const float s2 = 0.70710678f;
+    float pos[18] = { -2, -2, 2, 2, -2, 2, 2, 2, -2, -2, -2, 2, 2, 2, -2, -2, 2, -2 };
+    float nrm[6] = { 0, s2, s2, 0, s2, s2 };
+    mesh m = mesh_from(pos, nrm, 2);
+    scene s;
+    if (scene_make(&m, BUILD_SAH, &s)) {
+        render_opts o = { .mode = VKRT_MODE_NORMAL, .width = 24, .height = 24,
+                          .camera = { .eye = { 0, 1, 1 }, .fov_y_degrees = 60 } };
+        float *img = render(&s, o);
+        uint32_t hits = 0;
+        for (size_t i = 0; i < (size_t)o.width * o.height; i++) {
+            const float *px = img + i * 4;
+            if (px[3] == 0.0f) continue;
+            hits++;
+            CHECK_NEAR(px[0], 0.5, 1e-4);
+            CHECK_NEAR(px[1], s2 * 0.5 + 0.5, 1e-4);
+            CHECK_NEAR(px[2], s2 * 0.5 + 0.5, 1e-4);
+            CHECK(px[3] == 1.0f);
+        }
+        CHECK_EQ_U64(hits, (uint64_t)o.width * o.height);
+        free(img);
+        /* Seen from behind, the tracer is two-sided and still shows the stored normal. */
+        o.camera = (vkrt_camera){ .eye = { 0, -1, -1 } };
+        img = render(&s, o);
+        const float *centre = img + ((size_t)12 * o.width + 12) * 4;
+        CHECK(centre[3] == 1.0f);
+        CHECK_NEAR(centre[1], s2 * 0.5 + 0.5, 1e-4);
+        free(img);
+        scene_free(&s);
+    }
+    mesh_free_local(&m);
+}
+
+static void miss_pixels_follow_the_mode_conventions(void)
+{
+    float pos[9] = { 5, 5, 0, 6, 5, 0, 5, 6, 0 };
+    mesh m = mesh_from(pos, NULL, 1);
+    scene s;
+    if (scene_make(&m, BUILD_SINGLE_LEAF, &s)) {
+        render_opts o = { .width = 4, .height = 4 };
+        const vkrt_mode modes[3] = { VKRT_MODE_NORMAL, VKRT_MODE_DEPTH, VKRT_MODE_ID };
+        const float expect[3][4] = { { 0, 0, 0, 0 }, { -1, 0, 0, 0 }, { -1, 0, 0, 0 } };
+        for (int k = 0; k < 3; k++) {
+            o.mode = modes[k];
+            float *img = render(&s, o);
+            for (size_t i = 0; i < 16; i++) CHECK(memcmp(img + i * 4, expect[k], sizeof expect[k]) == 0);
+            free(img);
+        }
+        scene_free(&s);
+    }
+    mesh_free_local(&m);
+}
+
+/* ---- traversal equivalence ---- */
+
+typedef struct named_mesh {
+    const char *name;
+    mesh m;
+    bool loaded; /* true: free with mesh_destroy */
+    uint32_t size;
+} named_mesh;
+
+static int test_meshes(named_mesh *out)
+{
+    int n = 0;
+    out[n++] = (named_mesh){ "sphere+ground", make_sphere_scene(24, 32), false, 64 };
+    out[n++] = (named_mesh){ "soup", make_soup(600, 7), false, 64 };
+    out[n++] = (named_mesh){ "cube", make_cube(), false, 48 };
+    const char *files[3] = { "teapot.obj", "bunny.obj", "homer_10k.obj" };
+    const uint32_t sizes[3] = { 80, 96, 48 };
+    for (int i = 0; i < 3; i++) {
+        out[n] = (named_mesh){ files[i], { 0 }, true, sizes[i] };
+        if (load_model(files[i], &out[n].m)) n++;
+    }
+    return n;
+}
+
+static void free_test_meshes(named_mesh *ms, int n)
+{
+    for (int i = 0; i < n; i++) {
+        if (ms[i].loaded) mesh_destroy(&c, &ms[i].m);
+        else mesh_free_local(&ms[i].m);
+    }
+}
+
+static void bvh_and_naive_give_identical_id_and_depth_images(void)
+{
+    named_mesh ms[8];
+    int n = test_meshes(ms);
+    /* A camera off the axes, so rays are not axis-aligned and hit boxes at odd angles. */
+    const vkrt_camera cams[2] = { { .fov_y_degrees = 0.0f }, { .eye = { 0.9f, 0.5f, 1.1f }, .target = { 0, 0.05f, 0 } } };
+    for (int i = 0; i < n; i++) {
+        float *ref_id[2] = { NULL, NULL };
+        for (int k = 0; k < BUILD_KINDS; k++) {
+            scene s;
+            if (!scene_make(&ms[i].m, (builder_kind)k, &s)) continue;
+            for (int ci = 0; ci < 2; ci++) {
+                render_opts o = { .width = ms[i].size, .height = ms[i].size, .camera = cams[ci], .threads = 2 };
+                o.mode = VKRT_MODE_ID;
+                o.traversal = VKRT_TRAVERSAL_BVH;
+                float *bvh_id = render(&s, o);
+                o.traversal = VKRT_TRAVERSAL_NAIVE;
+                float *naive_id = render(&s, o);
+                o.mode = VKRT_MODE_DEPTH;
+                float *naive_depth = render(&s, o);
+                o.traversal = VKRT_TRAVERSAL_BVH;
+                float *bvh_depth = render(&s, o);
+                CHECK_MSG(memcmp(bvh_id, naive_id, bytes(o)) == 0, "%s %s cam %d: id images differ", ms[i].name,
+                          builder_names[k], ci);
+                CHECK_MSG(memcmp(bvh_depth, naive_depth, bytes(o)) == 0, "%s %s cam %d: depth images differ",
+                          ms[i].name, builder_names[k], ci);
+                CHECK_MSG(count_hits(bvh_id, o) > (uint32_t)(o.width * o.height / 20), "%s cam %d: too few hits",
+                          ms[i].name, ci);
+                if (!ref_id[ci]) {
+                    ref_id[ci] = bvh_id;
+                    bvh_id = NULL;
+                } else {
+                    CHECK_MSG(memcmp(ref_id[ci], bvh_id, bytes(o)) == 0, "%s cam %d: %s and %s id images differ",
+                              ms[i].name, ci, builder_names[0], builder_names[k]);
+                }
+                free(bvh_id);
+                free(naive_id);
+                free(naive_depth);
+                free(bvh_depth);
+            }
+            scene_free(&s);
+        }
+        free(ref_id[0]);
+        free(ref_id[1]);
+    }
+    free_test_meshes(ms, n);
+}
+
+static void midpoint_and_sah_give_identical_images_in_every_mode(void)
+{
+    mesh m;
+    if (!load_model("bunny.obj", &m)) return;
+    scene a, b;
+    bool ok_a = scene_make(&m, BUILD_MIDPOINT, &a), ok_b = scene_make(&m, BUILD_SAH, &b);
+    if (ok_a && ok_b) {
+        const vkrt_mode modes[3] = { VKRT_MODE_ID, VKRT_MODE_DEPTH, VKRT_MODE_NORMAL };
+        for (int k = 0; k < 3; k++) {
+            render_opts o = { .mode = modes[k], .width = 72, .height = 56 };
+            float *ia = render(&a, o), *ib = render(&b, o);
+            CHECK_MSG(memcmp(ia, ib, bytes(o)) == 0, "mode %d differs between midpoint and sah", (int)modes[k]);
+            free(ia);
+            free(ib);
+        }
+    }
+    if (ok_a) scene_free(&a);
+    if (ok_b) scene_free(&b);
+    mesh_destroy(&c, &m);
+}
+
+/* ---- heat ---- */
+
+static void heatmap_counts_are_consistent(void)
+{
+    mesh m = make_sphere_scene(16, 24);
+    for (int k = BUILD_MIDPOINT; k < BUILD_KINDS; k++) {
+        scene s;
+        if (!scene_make(&m, (builder_kind)k, &s)) continue;
+        render_opts o = { .mode = VKRT_MODE_HEATMAP, .width = 40, .height = 40,
+                          .camera = { .eye = { 0.3f, 0.6f, 1.2f } } };
+        o.traversal = VKRT_TRAVERSAL_NAIVE;
+        o.heat = VKRT_HEAT_TRIS;
+        float *naive = render(&s, o);
+        o.traversal = VKRT_TRAVERSAL_BVH;
+        float *tris = render(&s, o);
+        o.heat = VKRT_HEAT_NODES;
+        float *nodes = render(&s, o);
+        o.heat = VKRT_HEAT_LEAVES;
+        float *leaves = render(&s, o);
+        o.mode = VKRT_MODE_ID;
+        float *id = render(&s, o);
+        o.traversal = VKRT_TRAVERSAL_NAIVE;
+        o.heat = VKRT_HEAT_NODES;
+        o.mode = VKRT_MODE_HEATMAP;
+        float *naive_nodes = render(&s, o);
+        uint32_t bad = 0;
+        for (size_t i = 0; i < (size_t)o.width * o.height; i++) {
+            const float *px = naive + i * 4;
+            bad += px[0] != (float)m.tri_count || px[1] != 0.0f || px[2] != 0.0f || px[3] != 1.0f;
+            bad += naive_nodes[i * 4] != 0.0f || naive_nodes[i * 4 + 3] != 1.0f;
+            bad += leaves[i * 4] > nodes[i * 4] || nodes[i * 4] > (float)s.b.node_count;
+            bad += tris[i * 4] > (float)m.tri_count;
+            bad += nodes[i * 4 + 3] != 1.0f || leaves[i * 4 + 3] != 1.0f || tris[i * 4 + 3] != 1.0f;
+            /* A hit needs a leaf entered and a triangle tested. */
+            if (id[i * 4] >= 0.0f) bad += leaves[i * 4] < 1.0f || tris[i * 4] < 1.0f || nodes[i * 4] < 1.0f;
+        }
+        CHECK_MSG(bad == 0, "%s: %u heat values inconsistent", builder_names[k], bad);
+        free(naive);
+        free(tris);
+        free(nodes);
+        free(leaves);
+        free(id);
+        free(naive_nodes);
+        scene_free(&s);
+    }
+    mesh_free_local(&m);
+}
+
+/* ---- threads and progress ---- */
+
+static void thread_counts_give_identical_images(void)
+{
+    mesh m = make_sphere_scene(20, 28);
+    scene s;
+    if (scene_make(&m, BUILD_SAH, &s)) {
+        const vkrt_mode modes[4] = { VKRT_MODE_NORMAL, VKRT_MODE_DEPTH, VKRT_MODE_ID, VKRT_MODE_HEATMAP };
+        for (int k = 0; k < 4; k++) {
+            /* 70x45 leaves partial tiles on the right and bottom. */
+            render_opts o = { .mode = modes[k], .width = 70, .height = 45, .threads = 1 };
+            float *one = render(&s, o);
+            o.threads = 2;
+            float *two = render(&s, o);
+            o.threads = 5;
+            float *five = render(&s, o);
+            CHECK_MSG(memcmp(one, two, bytes(o)) == 0, "mode %d: 1 vs 2 threads differ", (int)modes[k]);
+            CHECK_MSG(memcmp(one, five, bytes(o)) == 0, "mode %d: 1 vs 5 threads differ", (int)modes[k]);
+            free(one);
+            free(two);
+            free(five);
+        }
+        scene_free(&s);
+    }
+    mesh_free_local(&m);
+}
+
+typedef struct progress_log {
+    pthread_t caller;
+    atomic_int calls;
+    int cancel_after; /* < 0: never */
+    bool wrong_thread, out_of_range, not_monotonic;
+    float last;
+} progress_log;
+
+static bool on_progress(void *user, const char *stage, float fraction)
+{
+    progress_log *l = user;
+    (void)stage;
+    int n = atomic_fetch_add(&l->calls, 1) + 1;
+    if (!pthread_equal(pthread_self(), l->caller)) l->wrong_thread = true;
+    if (!(fraction >= 0.0f && fraction <= 1.0f)) l->out_of_range = true;
+    if (fraction < l->last) l->not_monotonic = true;
+    l->last = fraction;
+    return l->cancel_after < 0 || n < l->cancel_after;
+}
+
+static void progress_runs_on_the_caller_and_cancel_returns_cancelled(void)
+{
+    mesh m = make_sphere_scene(16, 24);
+    scene s;
+    if (scene_make(&m, BUILD_SAH, &s)) {
+        progress_log l = { .caller = pthread_self(), .cancel_after = -1 };
+        render_opts o = { .width = 128, .height = 128, .threads = 3, .progress = on_progress, .progress_user = &l };
+        vkrt_result r;
+        float *img = render_r(&s, o, &r);
+        CHECK(r == VKRT_OK);
+        CHECK(atomic_load(&l.calls) >= 1);
+        CHECK(l.last == 1.0f);
+        CHECK(!l.wrong_thread && !l.out_of_range && !l.not_monotonic);
+        free(img);
+
+        for (uint32_t threads = 1; threads <= 3; threads += 2) {
+            progress_log lc = { .caller = pthread_self(), .cancel_after = 1 };
+            o.progress_user = &lc;
+            o.threads = threads;
+            o.traversal = VKRT_TRAVERSAL_NAIVE;
+            img = render_r(&s, o, &r);
+            CHECK(r == VKRT_ERROR_CANCELLED);
+            CHECK(!lc.wrong_thread);
+            /* Honoured at once: no further callbacks after the one that said stop. */
+            CHECK_EQ_U64(atomic_load(&lc.calls), 1);
+            free(img);
+        }
+        scene_free(&s);
+    }
+    mesh_free_local(&m);
+}
+
+int main(void)
+{
+    core_init(&c, NULL, NULL, NULL);
+    RUN(camera_defaults_frame_the_unit_scene);
+    RUN(camera_rejects_bad_input);
+    RUN(octahedral_normals_round_trip_within_1e4);
+    RUN(packing_follows_bvh_order_with_face_normals);
+    RUN(single_triangle_gives_analytic_depth_and_exact_ids);
+    RUN(cube_face_gives_analytic_depth);
+    RUN(normal_mode_on_a_plane_gives_its_normal);
+    RUN(miss_pixels_follow_the_mode_conventions);
+    RUN(bvh_and_naive_give_identical_id_and_depth_images);
+    RUN(midpoint_and_sah_give_identical_images_in_every_mode);
+    RUN(heatmap_counts_are_consistent);
+    RUN(thread_counts_give_identical_images);
+    RUN(progress_runs_on_the_caller_and_cancel_returns_cancelled);
+    return check_exit();
+}

@@ -1,0 +1,367 @@
+/* The Vulkan path on the device (lavapipe in CI), validation layer on: every pipeline
+ * variant compiles and runs, the GPU agrees with the C reference, BVH and naive traversal give
+ * identical images, tiling is seamless. Any validation message fails the test. */
+#include <stdlib.h>
+#include <string.h>
+
+#include "check.h"
+#include "context.h"
+#include "shaders_embedded.h"
+#include "vk_buffer.h"
+#include "vk_pipeline.h"
+#include "vkrt.h"
+
+static vkrt_context *gpu, *cpu;
+static unsigned log_errors;
+
+static void on_log(void *user, vkrt_log_level level, const char *message)
+{
+    (void)user;
+    if (level <= VKRT_LOG_WARN) {
+        fprintf(stderr, "  [vkrt %s] %s\n", level == VKRT_LOG_ERROR ? "error" : "warning", message);
+        if (strstr(message, "validation")) log_errors++;
+    }
+}
+
+static vkrt_scene *make_scene(vkrt_context *ctx, const char *path, vkrt_bvh_builder builder)
+{
+    vkrt_scene *s = NULL;
+    vkrt_result r = vkrt_scene_create(ctx, &(vkrt_scene_desc){ .path = path, .builder = builder }, &s);
+    CHECK_MSG(r == VKRT_OK, "%s: %s", path ? path : "built-in", vkrt_context_last_error(ctx));
+    return s;
+}
+
+static float *render(vkrt_context *ctx, vkrt_scene *s, const vkrt_render_desc *d)
+{
+    size_t n = vkrt_render_floats(d->width, d->height);
+    float *rgba = malloc(n * sizeof *rgba);
+    vkrt_result r = vkrt_render(ctx, s, d, rgba, n, NULL);
+    CHECK_MSG(r == VKRT_OK, "render: %s", vkrt_context_last_error(ctx));
+    if (r != VKRT_OK) {
+        free(rgba);
+        return NULL;
+    }
+    return rgba;
+}
+
+typedef struct agreement {
+    size_t pixels, same_id, both_hit;
+    double max_rel_depth;
+} agreement;
+
+/* Compares two id-mode images: r = triangle id or -1, and the depth renders alongside. */
+static agreement compare(const float *id_a, const float *id_b, const float *depth_a, const float *depth_b, size_t pixels)
+{
+    agreement a = { .pixels = pixels };
+    for (size_t i = 0; i < pixels; i++) {
+        if (id_a[i * 4] == id_b[i * 4]) a.same_id++;
+        float da = depth_a[i * 4], db = depth_b[i * 4];
+        if (da >= 0 && db >= 0) {
+            a.both_hit++;
+            double rel = fabs((double)da - (double)db) / fmax((double)db, 1e-30);
+            if (rel > a.max_rel_depth) a.max_rel_depth = rel;
+        }
+    }
+    return a;
+}
+
+static void gpu_matches_cpu_on(const char *path, vkrt_bvh_builder builder, uint32_t w, uint32_t h)
+{
+    vkrt_scene *sg = make_scene(gpu, path, builder), *sc = make_scene(cpu, path, builder);
+    if (!sg || !sc) goto done;
+    vkrt_render_desc d = { .width = w, .height = h, .mode = VKRT_MODE_ID };
+    float *gid = render(gpu, sg, &d), *cid = render(cpu, sc, &d);
+    d.mode = VKRT_MODE_DEPTH;
+    float *gdepth = render(gpu, sg, &d), *cdepth = render(cpu, sc, &d);
+    if (gid && cid && gdepth && cdepth) {
+        agreement a = compare(gid, cid, gdepth, cdepth, (size_t)w * h);
+        double share = (double)a.same_id / (double)a.pixels;
+        CHECK_MSG(share >= 0.999, "%s: GPU and CPU ids agree on %.4f%% of pixels", path ? path : "built-in", share * 100);
+        CHECK_MSG(a.max_rel_depth <= 1e-5, "%s: max relative depth difference %.3g", path ? path : "built-in",
+                  a.max_rel_depth);
+        CHECK_MSG(a.both_hit > a.pixels / 20, "%s: only %zu of %zu pixels hit", path ? path : "built-in", a.both_hit,
+                  a.pixels);
+    }
+    free(gid);
+    free(cid);
+    free(gdepth);
+    free(cdepth);
+done:
+    vkrt_scene_destroy(sg);
+    vkrt_scene_destroy(sc);
+}
+
+static void gpu_matches_cpu_reference(void)
+{
+    gpu_matches_cpu_on(VKRT_MODELS_DIR "/meshes/bunny.obj", VKRT_BVH_BUILDER_BINNED_SAH, 96, 96);
+    gpu_matches_cpu_on(VKRT_MODELS_DIR "/meshes/bunny.obj", VKRT_BVH_BUILDER_MIDPOINT, 96, 96);
+    gpu_matches_cpu_on(VKRT_MODELS_DIR "/meshes/dragon_48k.obj", VKRT_BVH_BUILDER_BINNED_SAH, 96, 96);
+    gpu_matches_cpu_on(NULL, VKRT_BVH_BUILDER_DEFAULT, 96, 96);
+}
+
+/* A size that is no multiple of the 256-pixel tile or the 8x8 workgroup checks the seams. */
+static void gpu_tiles_are_seamless(void)
+{
+    gpu_matches_cpu_on(VKRT_MODELS_DIR "/meshes/teapot.obj", VKRT_BVH_BUILDER_DEFAULT, 300, 261);
+}
+
+static void gpu_normal_and_heatmap_match_cpu(void)
+{
+    vkrt_scene *sg = make_scene(gpu, VKRT_MODELS_DIR "/meshes/bunny.obj", VKRT_BVH_BUILDER_DEFAULT);
+    vkrt_scene *sc = make_scene(cpu, VKRT_MODELS_DIR "/meshes/bunny.obj", VKRT_BVH_BUILDER_DEFAULT);
+    if (!sg || !sc) goto done;
+    const uint32_t w = 64, h = 64;
+    vkrt_render_desc d = { .width = w, .height = h, .mode = VKRT_MODE_NORMAL };
+    float *g = render(gpu, sg, &d), *c = render(cpu, sc, &d);
+    size_t close = 0;
+    for (size_t i = 0; g && c && i < (size_t)w * h; i++) {
+        float dx = g[i * 4] - c[i * 4], dy = g[i * 4 + 1] - c[i * 4 + 1], dz = g[i * 4 + 2] - c[i * 4 + 2];
+        if (dx * dx + dy * dy + dz * dz < 1e-6f && g[i * 4 + 3] == c[i * 4 + 3]) close++;
+    }
+    CHECK_MSG(close >= (size_t)(0.999 * w * h), "normal mode: %zu of %u pixels agree", close, w * h);
+    free(g);
+    free(c);
+    for (vkrt_heat heat = VKRT_HEAT_NODES; heat <= VKRT_HEAT_TRIS; heat++) {
+        d.mode = VKRT_MODE_HEATMAP;
+        d.heat = heat;
+        g = render(gpu, sg, &d);
+        c = render(cpu, sc, &d);
+        size_t same = 0;
+        float max_count = 0;
+        for (size_t i = 0; g && c && i < (size_t)w * h; i++) {
+            if (g[i * 4] == c[i * 4]) same++;
+            if (g[i * 4] > max_count) max_count = g[i * 4];
+        }
+        CHECK_MSG(same >= (size_t)(0.99 * w * h), "heatmap %d: %zu of %u pixels agree", (int)heat, same, w * h);
+        CHECK_MSG(max_count > 1, "heatmap %d: counts never exceed %g", (int)heat, max_count);
+        free(g);
+        free(c);
+    }
+done:
+    vkrt_scene_destroy(sg);
+    vkrt_scene_destroy(sc);
+}
+
+/* dragon_48k has 47,794 triangles: naive traversal runs in several chunks of
+ * VKRT_NAIVE_CHUNK_TRIS, which must merge to exactly the BVH's closest hits. */
+static void gpu_bvh_and_naive_give_identical_images(void)
+{
+    vkrt_scene *s = make_scene(gpu, VKRT_MODELS_DIR "/meshes/dragon_48k.obj", VKRT_BVH_BUILDER_DEFAULT);
+    if (!s) return;
+    const uint32_t w = 48, h = 48;
+    for (vkrt_mode mode = VKRT_MODE_DEPTH; mode <= VKRT_MODE_ID; mode += 2) {
+        vkrt_render_desc d = { .width = w, .height = h, .mode = mode, .traversal = VKRT_TRAVERSAL_BVH };
+        float *b = render(gpu, s, &d);
+        d.traversal = VKRT_TRAVERSAL_NAIVE;
+        float *n = render(gpu, s, &d);
+        if (b && n) {
+            size_t hits = 0;
+            for (size_t i = 0; i < (size_t)w * h; i++) hits += b[i * 4] >= 0;
+            CHECK_MSG(memcmp(b, n, (size_t)w * h * 4 * sizeof(float)) == 0, "mode %d: BVH and naive images differ",
+                      (int)mode);
+            CHECK_MSG(hits > (size_t)w * h / 10, "mode %d: only %zu pixels hit", (int)mode, hits);
+        }
+        free(b);
+        free(n);
+    }
+    vkrt_scene_destroy(s);
+}
+
+static void gpu_builtin_scene_renders(void)
+{
+    vkrt_scene *s = make_scene(gpu, NULL, VKRT_BVH_BUILDER_DEFAULT);
+    if (!s) return;
+    vkrt_render_desc d = { .width = 64, .height = 64 };
+    float *px = render(gpu, s, &d);
+    size_t hits = 0, unit = 0;
+    for (size_t i = 0; px && i < 64 * 64; i++) {
+        if (px[i * 4 + 3] != 1.0f) continue;
+        hits++;
+        float x = px[i * 4] * 2 - 1, y = px[i * 4 + 1] * 2 - 1, z = px[i * 4 + 2] * 2 - 1;
+        if (fabsf(x * x + y * y + z * z - 1.0f) < 1e-3f) unit++;
+    }
+    CHECK_MSG(hits > 64 * 64 / 4, "built-in scene: only %zu of 4096 pixels hit", hits);
+    CHECK_EQ_U64(unit, hits);
+    free(px);
+    vkrt_scene_destroy(s);
+}
+
+/* Every specialisation the CLI can ask for compiles, runs and passes validation. */
+static void gpu_every_pipeline_variant_runs(void)
+{
+    vkrt_scene *s = make_scene(gpu, VKRT_MODELS_DIR "/meshes/teapot.obj", VKRT_BVH_BUILDER_DEFAULT);
+    if (!s) return;
+    for (vkrt_traversal t = VKRT_TRAVERSAL_BVH; t <= VKRT_TRAVERSAL_NAIVE; t++) {
+        for (vkrt_mode m = VKRT_MODE_NORMAL; m <= VKRT_MODE_ID; m++) {
+            for (vkrt_heat heat = VKRT_HEAT_NODES; heat <= (m == VKRT_MODE_HEATMAP ? VKRT_HEAT_TRIS : VKRT_HEAT_NODES);
+                 heat++) {
+                vkrt_render_desc d = { .width = 16, .height = 16, .mode = m, .traversal = t, .heat = heat };
+                free(render(gpu, s, &d));
+            }
+        }
+    }
+    vkrt_scene_destroy(s);
+}
+
+static void gpu_render_rejects_bad_arguments(void)
+{
+    vkrt_scene *s = make_scene(gpu, VKRT_MODELS_DIR "/meshes/teapot.obj", VKRT_BVH_BUILDER_DEFAULT);
+    if (!s) return;
+    float px[16];
+    CHECK(vkrt_render(gpu, s, &(vkrt_render_desc){ .width = 2, .height = 2 }, px, 15, NULL) == VKRT_ERROR_INVALID_ARGUMENT);
+    CHECK(strstr(vkrt_context_last_error(gpu), "out_rgba") != NULL);
+    CHECK(vkrt_render(gpu, s, &(vkrt_render_desc){ .width = 2, .height = 2, .mode = 99 }, px, 16, NULL) ==
+          VKRT_ERROR_INVALID_ARGUMENT);
+    vkrt_render_desc nan_eye = { .width = 2, .height = 2, .camera = { .eye = { NAN, 0, 1 } } };
+    CHECK(vkrt_render(gpu, s, &nan_eye, px, 16, NULL) == VKRT_ERROR_INVALID_ARGUMENT);
+    vkrt_scene_destroy(s);
+}
+
+/* Fills `count` words with distinct, ordinary float bit patterns (no NaNs to be canonicalised). */
+static void fill_distinct(void *p, size_t bytes, float base)
+{
+    for (size_t i = 0; i < bytes / 4; i++) {
+        float f = base + (float)i;
+        memcpy((char *)p + i * 4, &f, 4);
+    }
+}
+
+/* shaders/layout_check.comp copies every field of element 1 of each shared struct (and of the
+ * push constants) out in declaration order; as each struct is 4-byte scalars without padding,
+ * the words must equal the C struct's memory word for word. */
+static void gpu_shared_layouts_match_c(void)
+{
+    vk_context *vk = gpu->vk;
+    vkrt_gpu_node nodes[2];
+    vkrt_gpu_tri tris[2];
+    vkrt_gpu_hit hits[2];
+    vkrt_gpu_push push;
+    fill_distinct(nodes, sizeof nodes, 100.0f);
+    fill_distinct(tris, sizeof tris, 200.0f);
+    fill_distinct(hits, sizeof hits, 300.0f);
+    fill_distinct(&push, sizeof push, 400.0f);
+    const size_t words = (sizeof nodes[1] + sizeof tris[1] + sizeof hits[1] + sizeof push) / 4;
+    uint32_t expected[64];
+    CHECK(words <= 64);
+    memcpy(expected, &nodes[1], sizeof nodes[1]);
+    memcpy((char *)expected + sizeof nodes[1], &tris[1], sizeof tris[1]);
+    memcpy((char *)expected + sizeof nodes[1] + sizeof tris[1], &hits[1], sizeof hits[1]);
+    memcpy((char *)expected + sizeof nodes[1] + sizeof tris[1] + sizeof hits[1], &push, sizeof push);
+
+    vk_buffer in[3] = { 0 }, out = { 0 };
+    const void *data[3] = { nodes, tris, hits };
+    const size_t sizes[3] = { sizeof nodes, sizeof tris, sizeof hits };
+    VkDescriptorSetLayout set_layout = VK_NULL_HANDLE;
+    VkPipelineLayout layout = VK_NULL_HANDLE;
+    VkShaderModule module = VK_NULL_HANDLE;
+    VkPipeline pipeline = VK_NULL_HANDLE;
+    VkDescriptorPool pool = VK_NULL_HANDLE;
+    uint32_t *spirv = NULL;
+    size_t spirv_words = 0;
+    bool ok = true;
+    for (int i = 0; i < 3 && ok; i++) {
+        ok = vk_buffer_create(vk, sizes[i], VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT,
+                              VK_MEMORY_DEVICE, "layout input", &in[i]) == VKRT_OK &&
+             vk_buffer_upload(vk, &in[i], data[i], sizes[i]) == VKRT_OK;
+    }
+    ok = ok && vk_buffer_create(vk, 64 * 4, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, VK_MEMORY_READBACK, "layout output",
+                                &out) == VKRT_OK;
+    ok = ok && vk_compile_glsl(vk->core, "layout_check.comp", vkrt_shader_layout_check_comp, &spirv, &spirv_words) == VKRT_OK;
+    CHECK_MSG(ok, "setup: %s", vkrt_context_last_error(gpu));
+    if (ok) {
+        VkDescriptorSetLayoutBinding b[4];
+        for (uint32_t i = 0; i < 4; i++)
+            b[i] = (VkDescriptorSetLayoutBinding){ i, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, VK_SHADER_STAGE_COMPUTE_BIT, NULL };
+        VkDescriptorSetLayoutCreateInfo sl = { .sType = VK_STRUCTURE_TYPE_DESCRIPTOR_SET_LAYOUT_CREATE_INFO, .bindingCount = 4, .pBindings = b };
+        VkPushConstantRange range = { VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof push };
+        VkShaderModuleCreateInfo mi = { .sType = VK_STRUCTURE_TYPE_SHADER_MODULE_CREATE_INFO, .codeSize = spirv_words * 4, .pCode = spirv };
+        VkDescriptorPoolSize ps = { VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 4 };
+        VkDescriptorPoolCreateInfo pi = { .sType = VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO, .maxSets = 1, .poolSizeCount = 1, .pPoolSizes = &ps };
+        ok = vkCreateDescriptorSetLayout(vk->device, &sl, NULL, &set_layout) == VK_SUCCESS;
+        VkPipelineLayoutCreateInfo pl = { .sType = VK_STRUCTURE_TYPE_PIPELINE_LAYOUT_CREATE_INFO, .setLayoutCount = 1,
+                                          .pSetLayouts = &set_layout, .pushConstantRangeCount = 1, .pPushConstantRanges = &range };
+        ok = ok && vkCreatePipelineLayout(vk->device, &pl, NULL, &layout) == VK_SUCCESS;
+        ok = ok && vkCreateShaderModule(vk->device, &mi, NULL, &module) == VK_SUCCESS;
+        VkComputePipelineCreateInfo ci = {
+            .sType = VK_STRUCTURE_TYPE_COMPUTE_PIPELINE_CREATE_INFO,
+            .stage = { .sType = VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO, .stage = VK_SHADER_STAGE_COMPUTE_BIT,
+                       .module = module, .pName = "main" },
+            .layout = layout,
+        };
+        ok = ok && vkCreateComputePipelines(vk->device, VK_NULL_HANDLE, 1, &ci, NULL, &pipeline) == VK_SUCCESS;
+        ok = ok && vkCreateDescriptorPool(vk->device, &pi, NULL, &pool) == VK_SUCCESS;
+        VkDescriptorSet set = VK_NULL_HANDLE;
+        VkDescriptorSetAllocateInfo ai = { .sType = VK_STRUCTURE_TYPE_DESCRIPTOR_SET_ALLOCATE_INFO, .descriptorPool = pool,
+                                           .descriptorSetCount = 1, .pSetLayouts = &set_layout };
+        ok = ok && vkAllocateDescriptorSets(vk->device, &ai, &set) == VK_SUCCESS;
+        CHECK(ok);
+        if (ok) {
+            VkDescriptorBufferInfo bi[4] = { { in[0].buffer, 0, VK_WHOLE_SIZE }, { in[1].buffer, 0, VK_WHOLE_SIZE },
+                                             { in[2].buffer, 0, VK_WHOLE_SIZE }, { out.buffer, 0, VK_WHOLE_SIZE } };
+            VkWriteDescriptorSet w[4];
+            for (uint32_t i = 0; i < 4; i++)
+                w[i] = (VkWriteDescriptorSet){ .sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET, .dstSet = set, .dstBinding = i,
+                                               .descriptorCount = 1, .descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER,
+                                               .pBufferInfo = &bi[i] };
+            vkUpdateDescriptorSets(vk->device, 4, w, 0, NULL);
+            VkCommandBuffer cmd;
+            CHECK(vk_commands_begin(vk, &cmd) == VKRT_OK);
+            vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline);
+            vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, layout, 0, 1, &set, 0, NULL);
+            vkCmdPushConstants(cmd, layout, VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof push, &push);
+            vkCmdDispatch(cmd, 1, 1, 1);
+            /* The host reads what the shader wrote. */
+            VkMemoryBarrier to_host = { .sType = VK_STRUCTURE_TYPE_MEMORY_BARRIER, .srcAccessMask = VK_ACCESS_SHADER_WRITE_BIT,
+                                        .dstAccessMask = VK_ACCESS_HOST_READ_BIT };
+            vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_PIPELINE_STAGE_HOST_BIT, 0, 1, &to_host, 0,
+                                 NULL, 0, NULL);
+            CHECK(vk_commands_submit_wait(vk, cmd) == VKRT_OK);
+            CHECK(vk_buffer_invalidate(vk, &out) == VKRT_OK);
+            const uint32_t *got = out.mapped;
+            for (size_t i = 0; i < words; i++)
+                CHECK_MSG(got[i] == expected[i], "word %zu: shader read 0x%08x, C wrote 0x%08x", i, got[i], expected[i]);
+        }
+    }
+    if (pool) vkDestroyDescriptorPool(vk->device, pool, NULL);
+    if (pipeline) vkDestroyPipeline(vk->device, pipeline, NULL);
+    if (module) vkDestroyShaderModule(vk->device, module, NULL);
+    if (layout) vkDestroyPipelineLayout(vk->device, layout, NULL);
+    if (set_layout) vkDestroyDescriptorSetLayout(vk->device, set_layout, NULL);
+    core_free(vk->core, spirv);
+    for (int i = 0; i < 3; i++) vk_buffer_destroy(vk, &in[i]);
+    vk_buffer_destroy(vk, &out);
+}
+
+int main(void)
+{
+    vkrt_context_desc desc = { .backend = VKRT_BACKEND_GPU, .log = on_log, .validation = true };
+    desc.pipeline_cache_path = getenv("VKRT_PIPELINE_CACHE");
+    vkrt_result r = vkrt_context_create(&desc, &gpu);
+    if (r == VKRT_ERROR_NO_DEVICE && !getenv("CI")) {
+        fprintf(stderr, "no Vulkan device: skipped (in CI this fails)\n");
+        return 77;
+    }
+    if (r != VKRT_OK) {
+        fprintf(stderr, "cannot create the GPU context: %s\n", vkrt_result_string(r));
+        return 1;
+    }
+    fprintf(stderr, "device: %s\n", vkrt_context_device_name(gpu));
+    r = vkrt_context_create(&(vkrt_context_desc){ .backend = VKRT_BACKEND_CPU, .log = on_log }, &cpu);
+    CHECK(r == VKRT_OK);
+    if (r != VKRT_OK) return check_exit();
+
+    RUN(gpu_shared_layouts_match_c);
+    RUN(gpu_every_pipeline_variant_runs);
+    RUN(gpu_matches_cpu_reference);
+    RUN(gpu_tiles_are_seamless);
+    RUN(gpu_normal_and_heatmap_match_cpu);
+    RUN(gpu_bvh_and_naive_give_identical_images);
+    RUN(gpu_builtin_scene_renders);
+    RUN(gpu_render_rejects_bad_arguments);
+
+    CHECK_EQ_U64(vkrt_context_validation_messages(gpu), 0);
+    vkrt_context_destroy(gpu);
+    vkrt_context_destroy(cpu);
+    CHECK_EQ_U64(log_errors, 0);
+    return check_exit();
+}

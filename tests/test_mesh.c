@@ -1,0 +1,822 @@
+/* The mesh module: OBJ and glTF loading, triangle order, transforms, normals, normalisation,
+ * the built-in scene, and a code plus a message naming the file for every kind of bad input. */
+#include <math.h>
+#include <stdbool.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#include "check.h"
+#include "mesh.h"
+
+#define MODEL(rel) VKRT_MODELS_DIR "/" rel
+#define DATA(rel) VKRT_TEST_DATA_DIR "/" rel
+
+static core g_core;
+
+static const char *temp_dir(void)
+{
+    static char dir[64];
+    if (!dir[0]) {
+        snprintf(dir, sizeof dir, "/tmp/vkrt_test_mesh_XXXXXX");
+        if (!mkdtemp(dir)) {
+            fprintf(stderr, "mkdtemp failed\n");
+            exit(1);
+        }
+    }
+    return dir;
+}
+
+/* Writes bytes to a file in the temporary directory and returns its path (static storage,
+ * one of a few rotating slots so two paths can be alive at once). */
+static const char *temp_file(const char *name, const void *bytes, size_t size)
+{
+    static char paths[4][256];
+    static int slot;
+    char *path = paths[slot++ % 4];
+    snprintf(path, 256, "%s/%s", temp_dir(), name);
+    FILE *f = fopen(path, "wb");
+    if (!f || fwrite(bytes, 1, size, f) != size) {
+        fprintf(stderr, "cannot write %s\n", path);
+        exit(1);
+    }
+    fclose(f);
+    return path;
+}
+
+static const char *temp_text(const char *name, const char *text)
+{
+    return temp_file(name, text, strlen(text));
+}
+
+static void *read_whole(const char *path, size_t *size)
+{
+    FILE *f = fopen(path, "rb");
+    if (!f) return NULL;
+    fseek(f, 0, SEEK_END);
+    long n = ftell(f);
+    fseek(f, 0, SEEK_SET);
+    void *data = malloc((size_t)n + 1);
+    *size = fread(data, 1, (size_t)n, f);
+    ((char *)data)[*size] = '\0';
+    fclose(f);
+    return data;
+}
+
+static void remove_temp_dir(void)
+{
+    static const char *const names[] = { "inf.obj", "huge.obj", "zero_index.obj", "far_relative.obj", "forward.obj",
+                                         "bad_normal.obj", "text.obj", "nul.obj", "empty_file.obj", "mesh.stl",
+                                         "missing_bin.gltf", "unknown_ext.gltf", "meshopt.gltf", "truncated.glb",
+                                         "truncated_header.glb", "bad_json.gltf", "glb_named.obj", "cycle.gltf",
+                                         "no_scene.gltf", "nan.gltf", "UPPER.OBJ" };
+    char path[256];
+    for (size_t i = 0; i < sizeof names / sizeof names[0]; i++) {
+        snprintf(path, sizeof path, "%s/%s", temp_dir(), names[i]);
+        remove(path);
+    }
+    rmdir(temp_dir());
+}
+
+static vkrt_result load(const char *path, mesh *m)
+{
+    core_clear_error(&g_core);
+    return mesh_load(&g_core, path, m);
+}
+
+static const float *corner(const mesh *m, uint32_t tri, int k)
+{
+    return m->positions + (size_t)tri * 9 + 3 * k;
+}
+
+static const float *corner_normal(const mesh *m, uint32_t tri, int k)
+{
+    return m->normals + (size_t)tri * 9 + 3 * k;
+}
+
+static void check_corner(const mesh *m, uint32_t tri, int k, float x, float y, float z, double eps)
+{
+    if (tri >= m->tri_count) {
+        CHECK_MSG(tri < m->tri_count, "triangle %u of %u", tri, m->tri_count);
+        return;
+    }
+    const float *p = corner(m, tri, k);
+    CHECK_MSG(fabs(p[0] - x) <= eps && fabs(p[1] - y) <= eps && fabs(p[2] - z) <= eps,
+              "triangle %u corner %d is (%.9g %.9g %.9g), expected (%.9g %.9g %.9g)", tri, k, p[0], p[1], p[2], x, y, z);
+}
+
+static void check_normal(const mesh *m, uint32_t tri, int k, float x, float y, float z, double eps)
+{
+    if (tri >= m->tri_count) return;
+    const float *n = corner_normal(m, tri, k);
+    CHECK_MSG(fabs(n[0] - x) <= eps && fabs(n[1] - y) <= eps && fabs(n[2] - z) <= eps,
+              "triangle %u corner %d normal is (%.9g %.9g %.9g), expected (%.9g %.9g %.9g)", tri, k, n[0], n[1], n[2],
+              x, y, z);
+}
+
+/* Every position finite and every normal of unit length. */
+static void check_sane(const mesh *m, const char *what)
+{
+    size_t bad_positions = 0, bad_normals = 0;
+    for (size_t i = 0; i < (size_t)m->tri_count * 3; i++) {
+        const float *p = m->positions + 3 * i, *n = m->normals + 3 * i;
+        if (!isfinite(p[0]) || !isfinite(p[1]) || !isfinite(p[2])) bad_positions++;
+        double len = sqrt((double)n[0] * n[0] + (double)n[1] * n[1] + (double)n[2] * n[2]);
+        if (!(fabs(len - 1.0) < 1e-5)) bad_normals++;
+    }
+    CHECK_MSG(bad_positions == 0, "%s: %zu non-finite corners", what, bad_positions);
+    CHECK_MSG(bad_normals == 0, "%s: %zu normals not of unit length", what, bad_normals);
+}
+
+static void expect_triangles(const char *path, uint32_t expected)
+{
+    mesh m;
+    vkrt_result r = load(path, &m);
+    CHECK_MSG(r == VKRT_OK, "%s: %s", path, g_core.last_error);
+    CHECK_MSG(m.tri_count == expected, "%s: %u triangles, expected %u", path, m.tri_count, expected);
+    check_sane(&m, path);
+    mesh_destroy(&g_core, &m);
+}
+
+/* The call fails with `code`, the message names the file and holds `detail` (if given), and
+ * the mesh is left empty. */
+static void expect_failure(const char *path, vkrt_result code, const char *detail)
+{
+    mesh m;
+    memset(&m, 0xab, sizeof m); /* loaders must not rely on a zeroed mesh */
+    vkrt_result r = load(path, &m);
+    CHECK_MSG(r == code, "%s: got %s (%s), expected %s", path, vkrt_result_string(r), g_core.last_error,
+              vkrt_result_string(code));
+    const char *slash = strrchr(path, '/');
+    const char *name = slash ? slash + 1 : path;
+    CHECK_MSG(strstr(g_core.last_error, name) != NULL, "message \"%s\" does not name %s", g_core.last_error, name);
+    if (detail)
+        CHECK_MSG(strstr(g_core.last_error, detail) != NULL, "message \"%s\" lacks \"%s\"", g_core.last_error, detail);
+    CHECK(m.tri_count == 0 && m.positions == NULL && m.normals == NULL);
+    mesh_destroy(&g_core, &m);
+}
+
+/* ---- OBJ ------------------------------------------------------------------------------ */
+
+static void obj_quads_and_ngons_are_fanned_from_the_first_corner(void)
+{
+    expect_triangles(MODEL("obj/draco/cube_quads.obj"), 12);
+    mesh m;
+    CHECK(load(MODEL("obj/draco/octagon.obj"), &m) == VKRT_OK);
+    CHECK_EQ_U64(m.tri_count, 6);
+    static const float v[8][3] = { { 0, 1, 1 }, { 0, 2, 2 }, { 1, 3, 4 }, { 2, 3, 5 },
+                                   { 3, 2, 5 }, { 3, 1, 4 }, { 2, 0, 2 }, { 1, 0, 1 } };
+    for (uint32_t t = 0; t < m.tri_count; t++) {
+        check_corner(&m, t, 0, v[0][0], v[0][1], v[0][2], 0);
+        check_corner(&m, t, 1, v[t + 1][0], v[t + 1][1], v[t + 1][2], 0);
+        check_corner(&m, t, 2, v[t + 2][0], v[t + 2][1], v[t + 2][2], 0);
+    }
+    mesh_destroy(&g_core, &m);
+    expect_triangles(MODEL("obj/tinyobjloader/issue-319-002.obj"), 14);
+    expect_triangles(MODEL("obj/pywavefront/arbitrary-faces.obj"), 17);
+    expect_triangles(MODEL("obj/assimp/concave_polygon.obj"), 64); /* one 66-corner face */
+}
+
+static void obj_negative_indices_are_relative_to_the_vertices_so_far(void)
+{
+    mesh m;
+    CHECK(load(MODEL("obj/tinyobjloader/cornell_box.obj"), &m) == VKRT_OK);
+    CHECK_EQ_U64(m.tri_count, 36);
+    /* The floor's three quads come first; then "o light" with f -4 -3 -2 -1. */
+    check_corner(&m, 6, 0, 343.0f, 548.0f, 227.0f, 0);
+    check_corner(&m, 6, 1, 343.0f, 548.0f, 332.0f, 0);
+    check_corner(&m, 6, 2, 213.0f, 548.0f, 332.0f, 0);
+    check_corner(&m, 7, 2, 213.0f, 548.0f, 227.0f, 0);
+    mesh_destroy(&g_core, &m);
+    expect_triangles(MODEL("obj/pywavefront/simple_negative_indices.obj"), 2);
+    /* A face may also name a vertex defined further down the file. */
+    expect_triangles(temp_text("forward.obj", "f 1 2 3\nv 0 0 0\nv 1 0 0\nv 0 1 0\n"), 1);
+}
+
+static void obj_objects_and_groups_append_in_file_order_with_file_or_computed_normals(void)
+{
+    mesh m;
+    CHECK_MSG(load(DATA("groups.obj"), &m) == VKRT_OK, "%s", g_core.last_error);
+    CHECK_EQ_U64(m.tri_count, 6);
+    /* o first: a quad whose corners all carry vn 0 0.6 0.8. */
+    check_corner(&m, 0, 0, 0, 0, 0, 0);
+    check_corner(&m, 1, 2, 0, 1, 0, 0);
+    for (int t = 0; t < 2; t++)
+        for (int k = 0; k < 3; k++) check_normal(&m, (uint32_t)t, k, 0.0f, 0.6f, 0.8f, 1e-6);
+    /* g second: relative indices, no normals: computed, facing +z. */
+    check_corner(&m, 2, 0, 0, 0, 1, 0);
+    check_corner(&m, 2, 2, 0, 1, 1, 0);
+    for (int k = 0; k < 3; k++) check_normal(&m, 2, k, 0, 0, 1, 1e-6);
+    /* o third: one corner lacks vn, so the file's "0 0 -1" is not used: computed +z. */
+    check_corner(&m, 3, 0, 2, 0, 0, 0);
+    check_corner(&m, 5, 2, 1.5f, 1, 0, 0);
+    for (uint32_t t = 3; t < 6; t++)
+        for (int k = 0; k < 3; k++) check_normal(&m, t, k, 0, 0, 1, 1e-6);
+    mesh_destroy(&g_core, &m);
+    expect_triangles(MODEL("obj/assimp/spider.obj"), 1368);              /* 19 groups, v/vt/vn */
+    expect_triangles(MODEL("obj/pywavefront/simple_missing_normal.obj"), 4); /* "v/vt/" corners */
+    expect_triangles(MODEL("obj/pywavefront/box/box-N3F_V3F.obj"), 12);  /* with normals */
+    expect_triangles(MODEL("obj/pywavefront/box/box-V3F.obj"), 12);      /* without */
+}
+
+static void obj_file_normals_are_used_when_every_corner_has_one(void)
+{
+    mesh m;
+    CHECK(load(MODEL("obj/pywavefront/simple_normals.obj"), &m) == VKRT_OK);
+    size_t size;
+    char *text = read_whole(MODEL("obj/pywavefront/simple_normals.obj"), &size);
+    float vn[3] = { 0 };
+    const char *line = text ? strstr(text, "\nvn ") : NULL;
+    CHECK(line && sscanf(line + 4, "%f %f %f", &vn[0], &vn[1], &vn[2]) == 3);
+    double len = sqrt(vn[0] * vn[0] + vn[1] * vn[1] + vn[2] * vn[2]);
+    if (len > 0 && m.tri_count) check_normal(&m, 0, 0, (float)(vn[0] / len), (float)(vn[1] / len), (float)(vn[2] / len), 1e-6);
+    free(text);
+    mesh_destroy(&g_core, &m);
+}
+
+static void obj_missing_material_files_do_not_matter(void)
+{
+    expect_triangles(MODEL("obj/tinyobjloader/missing_material_file.obj"), 36);
+    expect_triangles(MODEL("obj/draco/test_sphere.obj"), 224);
+    expect_triangles(MODEL("obj/assimp/testmixed.obj"), 12); /* points and lines mixed in */
+}
+
+/* ---- glTF ----------------------------------------------------------------------------- */
+
+static bool same_triangles(const mesh *a, const mesh *b, double eps, bool normals)
+{
+    if (a->tri_count != b->tri_count) return false;
+    for (size_t i = 0; i < (size_t)a->tri_count * 9; i++) {
+        if (fabs(a->positions[i] - b->positions[i]) > eps) return false;
+        if (normals && fabs(a->normals[i] - b->normals[i]) > 1e-5) return false;
+    }
+    return true;
+}
+
+static void gltf_loads_external_bin_base64_and_glb(void)
+{
+    mesh a, b;
+    CHECK_MSG(load(MODEL("gltf/draco/Box/Box.gltf"), &a) == VKRT_OK, "%s", g_core.last_error);
+    CHECK_MSG(load(MODEL("gltf/draco/Box/Box.glb"), &b) == VKRT_OK, "%s", g_core.last_error);
+    CHECK_EQ_U64(a.tri_count, 12);
+    CHECK(same_triangles(&a, &b, 0, true));
+    check_sane(&a, "Box.gltf");
+    mesh_destroy(&g_core, &a);
+    mesh_destroy(&g_core, &b);
+    expect_triangles(MODEL("gltf/assimp/BoxTextured-Embedded/BoxTextured.gltf"), 12);
+    expect_triangles(MODEL("gltf/assimp/BoxTextured-Binary/BoxTextured.glb"), 12);
+    expect_triangles(MODEL("gltf/draco/SimpleSparseAccessor/SimpleSparseAccessor.gltf"), 12);
+    expect_triangles(MODEL("gltf/draco/Fox/Fox.gltf"), 576); /* non-indexed, no normals */
+}
+
+static void gltf_index_types_strips_fans_and_non_indexed_give_the_same_square(void)
+{
+    static const char *const files[] = { "04", "05", "06", "11", "12", "13", "14", "15" };
+    for (size_t i = 0; i < sizeof files / sizeof files[0]; i++) {
+        char path[256];
+        snprintf(path, sizeof path, MODEL("gltf/assimp/Mesh_PrimitiveMode/Mesh_PrimitiveMode_%s.gltf"), files[i]);
+        mesh m;
+        CHECK_MSG(load(path, &m) == VKRT_OK, "%s", g_core.last_error);
+        CHECK_MSG(m.tri_count == 2, "%s: %u triangles", path, m.tri_count);
+        double area = 0.0;
+        for (uint32_t t = 0; t < m.tri_count; t++) {
+            const float *p = corner(&m, t, 0), *q = corner(&m, t, 1), *r = corner(&m, t, 2);
+            /* Signed area seen from +z: every triangle wound the same way (counter-clockwise). */
+            double z = ((double)q[0] - p[0]) * ((double)r[1] - p[1]) - ((double)q[1] - p[1]) * ((double)r[0] - p[0]);
+            CHECK_MSG(z > 0, "%s: triangle %u is wound clockwise", path, t);
+            area += 0.5 * fabs(z);
+            for (int k = 0; k < 3; k++) check_normal(&m, t, k, 0, 0, 1, 1e-6);
+        }
+        CHECK_MSG(fabs(area - 1.0) < 1e-6, "%s: the triangles cover %g, not the unit square", path, area);
+        mesh_destroy(&g_core, &m);
+    }
+}
+
+static void gltf_mesh_instanced_by_several_nodes_appears_at_each(void)
+{
+    mesh m;
+    CHECK_MSG(load(MODEL("gltf/draco/CubeScaledInstances/cube_att.gltf"), &m) == VKRT_OK, "%s", g_core.last_error);
+    CHECK_EQ_U64(m.tri_count, 48);
+    /* Node 5 has four parents: identity, scale 4 at y 2, scale 2 at x 2, scale 3 at x -2. */
+    if (m.tri_count == 48) {
+        float lo[4][3], hi[4][3];
+        for (int inst = 0; inst < 4; inst++)
+            for (int j = 0; j < 3; j++) {
+                lo[inst][j] = INFINITY;
+                hi[inst][j] = -INFINITY;
+                for (uint32_t t = (uint32_t)inst * 12; t < (uint32_t)inst * 12 + 12; t++)
+                    for (int k = 0; k < 3; k++) {
+                        float v = corner(&m, t, k)[j];
+                        lo[inst][j] = v < lo[inst][j] ? v : lo[inst][j];
+                        hi[inst][j] = v > hi[inst][j] ? v : hi[inst][j];
+                    }
+            }
+        static const float scale[4] = { 1, 4, 2, 3 }, centre[4][3] = { { 0, 0, 0 }, { 0, 2, 0 }, { 2, 0, 0 }, { -2, 0, 0 } };
+        float size0 = hi[0][0] - lo[0][0];
+        for (int inst = 0; inst < 4; inst++)
+            for (int j = 0; j < 3; j++) {
+                CHECK_NEAR(hi[inst][j] - lo[inst][j], size0 * scale[inst], 1e-4);
+                CHECK_NEAR(0.5f * (hi[inst][j] + lo[inst][j]) - scale[inst] * 0.5f * (hi[0][j] + lo[0][j]),
+                           centre[inst][j], 1e-4);
+            }
+    }
+    mesh_destroy(&g_core, &m);
+    expect_triangles(MODEL("gltf/draco/CesiumMilkTruck/CesiumMilkTruck.gltf"), 3624);
+}
+
+static void gltf_instances_under_a_transformed_parent_land_at_exact_world_positions(void)
+{
+    mesh m;
+    CHECK_MSG(load(DATA("instanced.gltf"), &m) == VKRT_OK, "%s", g_core.last_error);
+    /* Only the default scene: the node of scene 1 at x = 100 is not there. */
+    CHECK_EQ_U64(m.tri_count, 4);
+    /* Parent: T(10,0,0) S(2). Child a: T(1,0,0): (x,y,z) -> (2x + 12, 2y, 2z). */
+    check_corner(&m, 0, 0, 12, 0, 0, 0);
+    check_corner(&m, 0, 1, 14, 0, 0, 0);
+    check_corner(&m, 0, 2, 14, 2, 0, 0);
+    check_corner(&m, 1, 0, 12, 0, 0, 0);
+    check_corner(&m, 1, 1, 14, 2, 0, 0);
+    check_corner(&m, 1, 2, 12, 2, 0, 0);
+    /* Child b: a matrix turning 90 degrees about z, then z - 4: (x,y,z) -> (10 - 2y, 2x, 2z - 8). */
+    check_corner(&m, 2, 0, 10, 0, -8, 0);
+    check_corner(&m, 2, 1, 10, 2, -8, 0);
+    check_corner(&m, 2, 2, 8, 2, -8, 0);
+    check_corner(&m, 3, 0, 10, 0, -8, 0);
+    check_corner(&m, 3, 1, 8, 2, -8, 0);
+    check_corner(&m, 3, 2, 8, 0, -8, 0);
+    for (uint32_t t = 0; t < m.tri_count; t++)
+        for (int k = 0; k < 3; k++) check_normal(&m, t, k, 0, 0, 1, 1e-6);
+    CHECK_NEAR(m.bounds_min[0], 8, 0);
+    CHECK_NEAR(m.bounds_max[0], 14, 0);
+    CHECK_NEAR(m.bounds_min[2], -8, 0);
+    mesh_destroy(&g_core, &m);
+}
+
+static void gltf_quantized_positions_load_through_khr_mesh_quantization(void)
+{
+    mesh q, f;
+    CHECK_MSG(load(MODEL("gltf/derived/Duck_quantized.glb"), &q) == VKRT_OK, "%s", g_core.last_error);
+    CHECK_MSG(load(MODEL("gltf/draco/Duck/Duck.glb"), &f) == VKRT_OK, "%s", g_core.last_error);
+    CHECK_EQ_U64(q.tri_count, 4212);
+    check_sane(&q, "Duck_quantized.glb");
+    /* Dequantised through the node transform, the duck fills the same box as the float one. */
+    double extent = 0.0;
+    for (int j = 0; j < 3; j++) extent = fmax(extent, f.bounds_max[j] - f.bounds_min[j]);
+    for (int j = 0; j < 3; j++) {
+        CHECK_NEAR(q.bounds_min[j], f.bounds_min[j], 0.01 * extent);
+        CHECK_NEAR(q.bounds_max[j], f.bounds_max[j], 0.01 * extent);
+    }
+    mesh_destroy(&g_core, &q);
+    mesh_destroy(&g_core, &f);
+}
+
+static void obj_and_gltf_of_the_same_mesh_give_the_same_triangles_in_order(void)
+{
+    mesh o, g;
+    CHECK_MSG(load(DATA("pair.obj"), &o) == VKRT_OK, "%s", g_core.last_error);
+    CHECK_MSG(load(DATA("pair.gltf"), &g) == VKRT_OK, "%s", g_core.last_error);
+    CHECK_EQ_U64(o.tri_count, 6);
+    CHECK(same_triangles(&o, &g, 1e-6, true));
+    mesh_destroy(&g_core, &o);
+    mesh_destroy(&g_core, &g);
+}
+
+/* ---- normals, bounds, normalisation --------------------------------------------------- */
+
+static void computed_normals_are_unit_and_point_outward_on_closed_convex_meshes(void)
+{
+    static const char *const files[] = { DATA("octahedron.obj"), DATA("pair.obj"), MODEL("obj/draco/cube_subd.obj"),
+                                         MODEL("obj/draco/cube_quads.obj") };
+    for (size_t i = 0; i < sizeof files / sizeof files[0]; i++) {
+        mesh m;
+        CHECK_MSG(load(files[i], &m) == VKRT_OK, "%s", g_core.last_error);
+        check_sane(&m, files[i]);
+        /* The bounding-box centre is inside these shapes. */
+        double c[3];
+        for (int j = 0; j < 3; j++) c[j] = 0.5 * (m.bounds_min[j] + m.bounds_max[j]);
+        size_t inward = 0;
+        for (size_t v = 0; v < (size_t)m.tri_count * 3; v++) {
+            const float *p = m.positions + 3 * v, *n = m.normals + 3 * v;
+            if ((p[0] - c[0]) * n[0] + (p[1] - c[1]) * n[1] + (p[2] - c[2]) * n[2] <= 0) inward++;
+        }
+        CHECK_MSG(inward == 0, "%s: %zu corner normals point inward", files[i], inward);
+        mesh_destroy(&g_core, &m);
+    }
+    /* Angle weighting: the octahedron's vertex normals are its axes exactly. */
+    mesh m;
+    CHECK(load(DATA("octahedron.obj"), &m) == VKRT_OK);
+    check_normal(&m, 0, 0, 1, 0, 0, 1e-6);
+    check_normal(&m, 0, 2, 0, 0, 1, 1e-6);
+    mesh_destroy(&g_core, &m);
+}
+
+static void append_transforms_normals_by_the_inverse_transpose(void)
+{
+    /* A triangle in the plane x + y = 1, normal (1,1,0)/sqrt2; scaling x by 2 turns the
+     * plane into x/2 + y = 1, normal (1,2,0)/sqrt5. */
+    const float p[9] = { 1, 0, 0, 0, 1, 0, 1, 0, 1 };
+    const float s = (float)(1.0 / sqrt(2.0));
+    const float n[9] = { s, s, 0, s, s, 0, s, s, 0 };
+    const float scale_x2[16] = { 2, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1 };
+    const float e = (float)(1.0 / sqrt(5.0));
+    for (int given = 0; given < 2; given++) {
+        mesh m = { 0 };
+        vkrt_result r = mesh_append_indexed(&g_core, &m,
+                                            &(mesh_primitive){ .positions = p, .vertex_count = 3,
+                                                               .normals = given ? n : NULL, .transform = scale_x2 },
+                                            "test", "tilted");
+        CHECK(r == VKRT_OK);
+        check_corner(&m, 0, 0, 2, 0, 0, 0);
+        check_corner(&m, 0, 2, 2, 0, 1, 0);
+        /* Winding (1,0,0) (0,1,0) (1,0,1): cross gives the -(1,1,0) side. */
+        float sign = given ? 1.0f : -1.0f;
+        for (int k = 0; k < 3; k++) check_normal(&m, 0, k, sign * e, sign * 2 * e, 0, 1e-6);
+        mesh_destroy(&g_core, &m);
+    }
+}
+
+static void append_keeps_computed_normals_outward_under_a_mirror(void)
+{
+    const float p[9] = { 0, 0, 0, 1, 0, 0, 0, 1, 0 }; /* counter-clockwise, facing +z */
+    const float mirror_x[16] = { -1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1 };
+    mesh m = { 0 };
+    CHECK(mesh_append_indexed(&g_core, &m, &(mesh_primitive){ .positions = p, .vertex_count = 3, .transform = mirror_x },
+                              "test", "mirrored") == VKRT_OK);
+    check_corner(&m, 0, 1, -1, 0, 0, 0); /* corners keep their order */
+    for (int k = 0; k < 3; k++) check_normal(&m, 0, k, 0, 0, 1, 1e-6);
+    mesh_destroy(&g_core, &m);
+}
+
+static void append_keeps_degenerate_triangles_and_falls_back_to_face_normals(void)
+{
+    /* Triangle 0 has zero area; triangles 1 and 2 are the same triangle back to back, so
+     * their shared vertices' normals cancel and each falls back to its own face normal. */
+    const float p[12] = { 0, 0, 0, 1, 0, 0, 2, 0, 0, 0, 1, 0 };
+    const uint32_t idx[9] = { 0, 1, 2, 0, 1, 3, 0, 3, 1 };
+    mesh m = { 0 };
+    CHECK(mesh_append_indexed(&g_core, &m,
+                              &(mesh_primitive){ .positions = p, .vertex_count = 4, .indices = idx, .index_count = 9 },
+                              "test", "degenerate") == VKRT_OK);
+    CHECK_EQ_U64(m.tri_count, 3);
+    check_sane(&m, "degenerate");
+    for (int k = 0; k < 3; k++) {
+        check_normal(&m, 0, k, 0, 0, 1, 0);
+        check_normal(&m, 1, k, 0, 0, 1, 1e-6);
+        check_normal(&m, 2, k, 0, 0, -1, 1e-6);
+    }
+    mesh_destroy(&g_core, &m);
+}
+
+static void append_rejects_non_finite_coordinates_and_bad_indices_naming_the_culprit(void)
+{
+    const float p[12] = { 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, NAN, 0 };
+    const uint32_t idx[3] = { 0, 1, 2 }, bad[3] = { 0, 1, 4 };
+    mesh m = { 0 };
+    vkrt_result r = mesh_append_indexed(&g_core, &m, &(mesh_primitive){ .positions = p, .vertex_count = 4, .indices = idx, .index_count = 3 },
+                                        "nan.obj", "object 0");
+    CHECK(r == VKRT_ERROR_INVALID_GEOMETRY);
+    CHECK_MSG(strstr(g_core.last_error, "nan.obj") && strstr(g_core.last_error, "object 0") &&
+                  strstr(g_core.last_error, "vertex 3") && strstr(g_core.last_error, "nan"),
+              "%s", g_core.last_error);
+    r = mesh_append_indexed(&g_core, &m, &(mesh_primitive){ .positions = p, .vertex_count = 3, .indices = bad, .index_count = 3 },
+                            "x.gltf", "mesh 1 primitive 2");
+    CHECK(r == VKRT_ERROR_INVALID_GEOMETRY);
+    CHECK_MSG(strstr(g_core.last_error, "x.gltf: mesh 1 primitive 2") && strstr(g_core.last_error, "4"), "%s", g_core.last_error);
+    r = mesh_append_indexed(&g_core, &m, &(mesh_primitive){ .positions = p, .vertex_count = 3, .indices = idx, .index_count = 2 },
+                            "x.gltf", "mesh 0");
+    CHECK(r == VKRT_ERROR_INVALID_GEOMETRY);
+    CHECK_EQ_U64(m.tri_count, 0);
+    mesh_destroy(&g_core, &m);
+}
+
+static void normalize_puts_the_bounds_in_the_unit_cube_with_largest_extent_one(void)
+{
+    static const char *const files[] = { MODEL("meshes/bunny.obj"), DATA("instanced.gltf"), MODEL("gltf/draco/Box/Box.glb") };
+    for (size_t i = 0; i < sizeof files / sizeof files[0]; i++) {
+        mesh m;
+        CHECK(load(files[i], &m) == VKRT_OK);
+        mesh_normalize(&m);
+        float lo[3] = { INFINITY, INFINITY, INFINITY }, hi[3] = { -INFINITY, -INFINITY, -INFINITY };
+        for (size_t v = 0; v < (size_t)m.tri_count * 3; v++)
+            for (int j = 0; j < 3; j++) {
+                lo[j] = fminf(lo[j], m.positions[3 * v + j]);
+                hi[j] = fmaxf(hi[j], m.positions[3 * v + j]);
+            }
+        double extent = 0.0;
+        for (int j = 0; j < 3; j++) {
+            CHECK(lo[j] >= -0.5f - 1e-6f && hi[j] <= 0.5f + 1e-6f);
+            CHECK_NEAR(0.5 * (lo[j] + hi[j]), 0.0, 1e-6);
+            CHECK(m.bounds_min[j] == lo[j] && m.bounds_max[j] == hi[j]);
+            extent = fmax(extent, (double)hi[j] - lo[j]);
+        }
+        CHECK_NEAR(extent, 1.0, 1e-6);
+        check_sane(&m, files[i]);
+        mesh_destroy(&g_core, &m);
+    }
+    /* A single point's worth of extent: only centred, never divided by zero. */
+    const float p[9] = { 3, 3, 3, 3, 3, 3, 3, 3, 3 };
+    mesh m = { 0 };
+    CHECK(mesh_append_indexed(&g_core, &m, &(mesh_primitive){ .positions = p, .vertex_count = 3 }, "test", "point") == VKRT_OK);
+    mesh_normalize(&m);
+    check_corner(&m, 0, 0, 0, 0, 0, 0);
+    mesh_destroy(&g_core, &m);
+}
+
+/* ---- the model set --------------------------------------------------------------------- */
+
+/* Every OBJ/glTF/GLB row of MANIFEST.md with a triangle count loads to that count ("N unique
+ * / M in scene": M), a count of 0 is VKRT_ERROR_EMPTY_SCENE, and `prefix` selects rows. */
+static void check_manifest(const char *prefix, size_t *out_rows)
+{
+    size_t size, rows = 0;
+    char *text = read_whole(MODEL("MANIFEST.md"), &size);
+    CHECK_MSG(text != NULL, "cannot read MANIFEST.md");
+    if (!text) return;
+    for (char *line = text; line && *line; line = strchr(line, '\n') ? strchr(line, '\n') + 1 : NULL) {
+        if (strncmp(line, "| `", 3) != 0) continue;
+        char rel[256];
+        const char *end = strchr(line + 3, '`');
+        if (!end || (size_t)(end - line - 3) >= sizeof rel) continue;
+        memcpy(rel, line + 3, (size_t)(end - line - 3));
+        rel[end - line - 3] = '\0';
+        if (strncmp(rel, prefix, strlen(prefix)) != 0) continue;
+        const char *ext = strrchr(rel, '.');
+        if (!ext || (strcmp(ext, ".obj") && strcmp(ext, ".gltf") && strcmp(ext, ".glb"))) continue;
+        /* | `path` | format | triangles | */
+        const char *cell = strchr(end, '|');
+        cell = cell ? strchr(cell + 1, '|') : NULL;
+        if (!cell) continue;
+        unsigned long expected = strtoul(cell + 1, NULL, 10);
+        const char *scene = strstr(cell + 1, "/ ");
+        const char *bar = strchr(cell + 1, '|');
+        if (scene && bar && scene < bar) expected = strtoul(scene + 2, NULL, 10);
+        char path[512];
+        snprintf(path, sizeof path, MODEL("%s"), rel);
+        rows++;
+        if (strstr(rel, "issue-140-zero-face-idx")) {
+            /* Index 0 is not OBJ; vkrt refuses it rather than guess. */
+            expect_failure(path, VKRT_ERROR_INVALID_GEOMETRY, "index 0");
+        } else if (expected == 0) {
+            expect_failure(path, VKRT_ERROR_EMPTY_SCENE, "only points or lines");
+        } else {
+            expect_triangles(path, (uint32_t)expected);
+        }
+    }
+    free(text);
+    *out_rows = rows;
+}
+
+static void meshes_triangle_counts_match_the_manifest(void)
+{
+    size_t rows = 0;
+    check_manifest("meshes/", &rows);
+    CHECK_EQ_U64(rows, 11);
+}
+
+static void every_obj_and_gltf_of_the_model_set_matches_the_manifest(void)
+{
+    size_t rows = 0;
+    check_manifest("obj/", &rows);
+    CHECK(rows >= 40);
+    check_manifest("gltf/", &rows);
+    CHECK(rows >= 25);
+}
+
+/* ---- bad input ------------------------------------------------------------------------- */
+
+static void missing_and_unreadable_files_are_io_errors_naming_the_file(void)
+{
+    expect_failure(DATA("does_not_exist.obj"), VKRT_ERROR_IO, "No such file");
+    expect_failure(DATA("does_not_exist.gltf"), VKRT_ERROR_IO, "No such file");
+    CHECK(mesh_load_gltf(&g_core, DATA("does_not_exist.glb"), &(mesh){ 0 }) == VKRT_ERROR_IO);
+    CHECK(mesh_load_obj(&g_core, DATA("does_not_exist.obj"), &(mesh){ 0 }) == VKRT_ERROR_IO);
+    expect_failure(VKRT_TEST_DATA_DIR, VKRT_ERROR_IO, NULL); /* a directory */
+    /* Box.gltf's buffer, copied without its .bin. */
+    size_t size;
+    char *box = read_whole(MODEL("gltf/draco/Box/Box.gltf"), &size);
+    CHECK(box != NULL);
+    if (box) expect_failure(temp_file("missing_bin.gltf", box, size), VKRT_ERROR_IO, "Box0.bin");
+    free(box);
+}
+
+static void obj_garbage_and_non_obj_text_are_parse_errors(void)
+{
+    expect_failure(DATA("garbage.obj"), VKRT_ERROR_PARSE, "binary");
+    expect_failure(temp_file("nul.obj", "v 0 0 0\nv 1 0 0\n\0v 0 1 0\nf 1 2 3\n", 34), VKRT_ERROR_PARSE, "offset 16");
+    expect_failure(temp_text("text.obj", "Dear reader,\nthis is a letter, not a mesh.\n"), VKRT_ERROR_PARSE, "not an OBJ file");
+}
+
+static void files_without_triangles_are_empty_scenes(void)
+{
+    expect_failure(DATA("empty.obj"), VKRT_ERROR_EMPTY_SCENE, "no faces");
+    expect_failure(temp_text("empty_file.obj", ""), VKRT_ERROR_EMPTY_SCENE, "no faces");
+    expect_failure(DATA("lines_points.obj"), VKRT_ERROR_EMPTY_SCENE, "only points or lines");
+    expect_failure(MODEL("obj/tinyobjloader/line-prim.obj"), VKRT_ERROR_EMPTY_SCENE, "only points or lines");
+    expect_failure(MODEL("obj/tinyobjloader/points-prim.obj"), VKRT_ERROR_EMPTY_SCENE, "only points or lines");
+    expect_failure(MODEL("gltf/assimp/Mesh_PrimitiveMode/Mesh_PrimitiveMode_00.gltf"), VKRT_ERROR_EMPTY_SCENE,
+                   "only points or lines");
+}
+
+static void obj_non_finite_coordinates_are_invalid_geometry(void)
+{
+    expect_failure(DATA("nan.obj"), VKRT_ERROR_INVALID_GEOMETRY, "vertex 3 has a non-finite coordinate (nan)");
+    expect_failure(temp_text("inf.obj", "v 0 0 0\nv 1 -INF 0\nv 0 1 0\nf 1 2 3\n"), VKRT_ERROR_INVALID_GEOMETRY,
+                   "line 2: vertex 2 has a non-finite coordinate (-INF)");
+    expect_failure(temp_text("huge.obj", "v 0 0 0\nv 1 0 0\nv 0 1e39 0\nf 1 2 3\n"), VKRT_ERROR_INVALID_GEOMETRY,
+                   "line 3: vertex 3");
+    expect_failure(temp_text("bad_normal.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 NaN\nf 1//1 2//1 3//1\n"),
+                   VKRT_ERROR_INVALID_GEOMETRY, "normal 1");
+}
+
+static void out_of_range_indices_are_invalid_geometry(void)
+{
+    expect_failure(DATA("bad_index.obj"), VKRT_ERROR_INVALID_GEOMETRY, "line 7: face 2 refers to vertex 9");
+    expect_failure(temp_text("zero_index.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n"), VKRT_ERROR_INVALID_GEOMETRY,
+                   "index 0");
+    expect_failure(temp_text("far_relative.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf -1 -2 -4\n"),
+                   VKRT_ERROR_INVALID_GEOMETRY, "relative index -4");
+    expect_failure(DATA("bad_index.gltf"), VKRT_ERROR_INVALID_GEOMETRY, "index 2 is 7");
+}
+
+static void gltf_required_extensions_vkrt_cannot_decode_are_unsupported(void)
+{
+    expect_failure(DATA("draco_required.gltf"), VKRT_ERROR_UNSUPPORTED, "KHR_draco_mesh_compression");
+    size_t size;
+    char *text = read_whole(DATA("pair.gltf"), &size);
+    CHECK(text != NULL);
+    if (!text) return;
+    /* The pair mesh, requiring extensions inserted after its opening brace. */
+    char *doc = malloc(size + 256);
+    snprintf(doc, size + 256, "{\"extensionsUsed\":[\"EXT_vkrt_unknown\"],\"extensionsRequired\":[\"EXT_vkrt_unknown\"],%s", text + 1);
+    expect_failure(temp_text("unknown_ext.gltf", doc), VKRT_ERROR_UNSUPPORTED, "EXT_vkrt_unknown");
+    snprintf(doc, size + 256, "{\"extensionsUsed\":[\"EXT_meshopt_compression\"],\"extensionsRequired\":[\"EXT_meshopt_compression\"],%s", text + 1);
+    expect_failure(temp_text("meshopt.gltf", doc), VKRT_ERROR_UNSUPPORTED, "EXT_meshopt_compression");
+    /* Quantization alone is decoded, so requiring it is fine. */
+    snprintf(doc, size + 256, "{\"extensionsUsed\":[\"KHR_mesh_quantization\"],\"extensionsRequired\":[\"KHR_mesh_quantization\"],%s", text + 1);
+    expect_triangles(temp_text("no_scene.gltf", doc), 6);
+    free(doc);
+    free(text);
+}
+
+static void gltf_truncated_and_malformed_files_are_parse_errors(void)
+{
+    size_t size;
+    unsigned char *glb = read_whole(MODEL("gltf/draco/Box/Box.glb"), &size);
+    CHECK(glb != NULL && size > 100);
+    if (!glb) return;
+    expect_failure(temp_file("truncated.glb", glb, size - 40), VKRT_ERROR_PARSE, NULL);
+    expect_failure(temp_file("truncated_header.glb", glb, 10), VKRT_ERROR_PARSE, NULL);
+    /* Content decides over the extension: a GLB named .obj is read as glTF. */
+    mesh m;
+    CHECK(load(temp_file("glb_named.obj", glb, size), &m) == VKRT_OK && m.tri_count == 12);
+    mesh_destroy(&g_core, &m);
+    free(glb);
+    expect_failure(temp_text("bad_json.gltf", "{\"asset\": {\"version\": \"2.0\"}, \"nodes\": [ {\"mesh\": 0 "),
+                   VKRT_ERROR_PARSE, "JSON");
+}
+
+static void gltf_node_cycles_are_parse_errors_not_hangs(void)
+{
+    size_t size;
+    char *text = read_whole(DATA("instanced.gltf"), &size);
+    CHECK(text != NULL);
+    if (!text) return;
+    /* Node 1 ("a") also lists the parent as its child, and node 3 lists node 1, so cgltf's
+     * single parent per node does not see the loop; the walk must. */
+    char *doc = malloc(size + 64);
+    char *a = strstr(text, "\"name\": \"a\",");
+    char *other = strstr(text, "\"name\": \"other scene\",");
+    CHECK(a && other);
+    if (a && other) {
+        size_t n = 0;
+        n += (size_t)snprintf(doc + n, size + 64 - n, "%.*s\"children\": [0], ", (int)(a - text), text);
+        n += (size_t)snprintf(doc + n, size + 64 - n, "%.*s\"children\": [1], ", (int)(other - a), a);
+        snprintf(doc + n, size + 64 - n, "%s", other);
+        mesh m;
+        vkrt_result r = load(temp_text("cycle.gltf", doc), &m);
+        CHECK_MSG(r == VKRT_ERROR_PARSE, "%s: %s", vkrt_result_string(r), g_core.last_error);
+        CHECK(strstr(g_core.last_error, "cycle.gltf") != NULL);
+        mesh_destroy(&g_core, &m);
+    }
+    free(doc);
+    free(text);
+}
+
+static void unknown_extensions_are_unsupported_and_case_is_ignored(void)
+{
+    expect_failure(temp_text("mesh.stl", "solid x\nendsolid x\n"), VKRT_ERROR_UNSUPPORTED, "unknown mesh format");
+    expect_triangles(temp_text("UPPER.OBJ", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"), 1);
+}
+
+/* ---- built-in scene -------------------------------------------------------------------- */
+
+static void builtin_scene_is_large_finite_unit_normalled_and_outward(void)
+{
+    mesh m;
+    memset(&m, 0xab, sizeof m);
+    CHECK(mesh_make_builtin(&g_core, &m) == VKRT_OK);
+    CHECK(m.tri_count > 1000);
+    check_sane(&m, "builtin");
+    /* Each triangle's winding agrees with its vertex normals (smooth or flat). */
+    size_t disagree = 0;
+    for (uint32_t t = 0; t < m.tri_count; t++) {
+        const float *p = corner(&m, t, 0), *q = corner(&m, t, 1), *r = corner(&m, t, 2), *n = corner_normal(&m, t, 0);
+        double e1[3] = { q[0] - p[0], q[1] - p[1], q[2] - p[2] }, e2[3] = { r[0] - p[0], r[1] - p[1], r[2] - p[2] };
+        double g[3] = { e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0] };
+        if (g[0] * n[0] + g[1] * n[1] + g[2] * n[2] <= 0) disagree++;
+    }
+    CHECK_MSG(disagree == 0, "%zu triangles wound against their normals", disagree);
+    /* Ground plane first: tilted 30 degrees toward the default camera on +z. */
+    check_normal(&m, 0, 0, 0, (float)cos(30 * 3.14159265358979 / 180), 0.5f, 1e-6);
+    mesh_normalize(&m);
+    for (int j = 0; j < 3; j++) CHECK(m.bounds_min[j] >= -0.5f - 1e-6f && m.bounds_max[j] <= 0.5f + 1e-6f);
+    mesh_destroy(&g_core, &m);
+}
+
+/* ---- allocation failure ---------------------------------------------------------------- */
+
+typedef struct failing_allocator {
+    long allocations, live, fail_at; /* fail_at < 0: never */
+} failing_allocator;
+
+static void *failing_alloc(void *user, size_t size)
+{
+    failing_allocator *a = user;
+    if (a->fail_at >= 0 && a->allocations++ == a->fail_at) return NULL;
+    void *p = malloc(size);
+    if (p) a->live++;
+    return p;
+}
+
+static void failing_free(void *user, void *pointer)
+{
+    failing_allocator *a = user;
+    a->live--;
+    free(pointer);
+}
+
+static void every_allocation_failure_is_out_of_memory_and_leaks_nothing(void)
+{
+    static const char *const files[] = { DATA("groups.obj"), DATA("pair.gltf"), MODEL("gltf/draco/Box/Box.gltf"),
+                                         MODEL("gltf/draco/CubeScaledInstances/cube_att.gltf"), NULL };
+    for (size_t i = 0; i < sizeof files / sizeof files[0]; i++) {
+        for (long n = 0;; n++) {
+            failing_allocator a = { .fail_at = n };
+            core c;
+            core_init(&c, &(vkrt_allocator){ .alloc = failing_alloc, .free = failing_free, .user = &a }, NULL, NULL);
+            mesh m;
+            vkrt_result r = files[i] ? mesh_load(&c, files[i], &m) : mesh_make_builtin(&c, &m);
+            const char *name = files[i] ? files[i] : "builtin";
+            if (r == VKRT_OK) {
+                CHECK_MSG(m.tri_count > 0, "%s", name);
+                mesh_destroy(&c, &m);
+                CHECK_MSG(a.live == 0, "%s: %ld allocations leaked", name, a.live);
+                CHECK_MSG(n > 0, "%s", name);
+                break;
+            }
+            CHECK_MSG(r == VKRT_ERROR_OUT_OF_MEMORY, "%s: failing allocation %ld gave %s (%s)", name, n,
+                      vkrt_result_string(r), c.last_error);
+            CHECK_MSG(a.live == 0, "%s: failing allocation %ld leaked %ld", name, n, a.live);
+            CHECK(m.tri_count == 0 && m.positions == NULL);
+            if (r != VKRT_ERROR_OUT_OF_MEMORY || n > 100000) break;
+        }
+    }
+}
+
+int main(void)
+{
+    core_init(&g_core, NULL, NULL, NULL);
+    RUN(obj_quads_and_ngons_are_fanned_from_the_first_corner);
+    RUN(obj_negative_indices_are_relative_to_the_vertices_so_far);
+    RUN(obj_objects_and_groups_append_in_file_order_with_file_or_computed_normals);
+    RUN(obj_file_normals_are_used_when_every_corner_has_one);
+    RUN(obj_missing_material_files_do_not_matter);
+    RUN(gltf_loads_external_bin_base64_and_glb);
+    RUN(gltf_index_types_strips_fans_and_non_indexed_give_the_same_square);
+    RUN(gltf_mesh_instanced_by_several_nodes_appears_at_each);
+    RUN(gltf_instances_under_a_transformed_parent_land_at_exact_world_positions);
+    RUN(gltf_quantized_positions_load_through_khr_mesh_quantization);
+    RUN(obj_and_gltf_of_the_same_mesh_give_the_same_triangles_in_order);
+    RUN(computed_normals_are_unit_and_point_outward_on_closed_convex_meshes);
+    RUN(append_transforms_normals_by_the_inverse_transpose);
+    RUN(append_keeps_computed_normals_outward_under_a_mirror);
+    RUN(append_keeps_degenerate_triangles_and_falls_back_to_face_normals);
+    RUN(append_rejects_non_finite_coordinates_and_bad_indices_naming_the_culprit);
+    RUN(normalize_puts_the_bounds_in_the_unit_cube_with_largest_extent_one);
+    RUN(meshes_triangle_counts_match_the_manifest);
+    RUN(every_obj_and_gltf_of_the_model_set_matches_the_manifest);
+    RUN(missing_and_unreadable_files_are_io_errors_naming_the_file);
+    RUN(obj_garbage_and_non_obj_text_are_parse_errors);
+    RUN(files_without_triangles_are_empty_scenes);
+    RUN(obj_non_finite_coordinates_are_invalid_geometry);
+    RUN(out_of_range_indices_are_invalid_geometry);
+    RUN(gltf_required_extensions_vkrt_cannot_decode_are_unsupported);
+    RUN(gltf_truncated_and_malformed_files_are_parse_errors);
+    RUN(gltf_node_cycles_are_parse_errors_not_hangs);
+    RUN(unknown_extensions_are_unsupported_and_case_is_ignored);
+    RUN(builtin_scene_is_large_finite_unit_normalled_and_outward);
+    RUN(every_allocation_failure_is_out_of_memory_and_leaks_nothing);
+    remove_temp_dir();
+    return check_exit();
+}

@@ -1,0 +1,114 @@
+// The only C++ of the library: it turns tinyobjloader's callbacks into the C ones of
+// tinyobj_shim.h and keeps every exception on this side of the boundary.
+#include "tinyobj_shim.h"
+
+#include <tiny_obj_loader.h>
+
+#include <cstring>
+#include <exception>
+#include <istream>
+#include <new>
+#include <streambuf>
+#include <string>
+#include <vector>
+
+namespace {
+
+// Reads the caller's bytes in place, so a large file is not copied into a std::string.
+class memory_buffer : public std::streambuf {
+public:
+    memory_buffer(const char *text, size_t size)
+    {
+        char *begin = const_cast<char *>(text);
+        setg(begin, begin, begin + size);
+    }
+};
+
+struct context {
+    const tinyobj_shim_callbacks *callbacks;
+    std::vector<tinyobj_shim_corner> corners;
+};
+
+void on_vertex(void *user, tinyobj::real_t x, tinyobj::real_t y, tinyobj::real_t z, tinyobj::real_t)
+{
+    const tinyobj_shim_callbacks *cb = static_cast<context *>(user)->callbacks;
+    if (cb->vertex) cb->vertex(cb->user, static_cast<float>(x), static_cast<float>(y), static_cast<float>(z));
+}
+
+void on_normal(void *user, tinyobj::real_t x, tinyobj::real_t y, tinyobj::real_t z)
+{
+    const tinyobj_shim_callbacks *cb = static_cast<context *>(user)->callbacks;
+    if (cb->normal) cb->normal(cb->user, static_cast<float>(x), static_cast<float>(y), static_cast<float>(z));
+}
+
+void on_index(void *user, tinyobj::index_t *indices, int count)
+{
+    context *ctx = static_cast<context *>(user);
+    if (!ctx->callbacks->face || count <= 0) return;
+    ctx->corners.resize(static_cast<size_t>(count));
+    for (int i = 0; i < count; i++) {
+        ctx->corners[i].v = indices[i].vertex_index;
+        ctx->corners[i].vt = indices[i].texcoord_index;
+        ctx->corners[i].vn = indices[i].normal_index;
+    }
+    ctx->callbacks->face(ctx->callbacks->user, ctx->corners.data(), ctx->corners.size());
+}
+
+void on_group(void *user, const char **, int)
+{
+    const tinyobj_shim_callbacks *cb = static_cast<context *>(user)->callbacks;
+    if (cb->group) cb->group(cb->user);
+}
+
+void on_object(void *user, const char *)
+{
+    const tinyobj_shim_callbacks *cb = static_cast<context *>(user)->callbacks;
+    if (cb->group) cb->group(cb->user);
+}
+
+void set_message(char *message, size_t message_size, const char *text)
+{
+    if (!message || message_size == 0) return;
+    std::strncpy(message, text, message_size - 1);
+    message[message_size - 1] = '\0';
+    // tinyobjloader ends its messages with a newline; the caller adds its own context.
+    size_t n = std::strlen(message);
+    while (n && (message[n - 1] == '\n' || message[n - 1] == '\r')) message[--n] = '\0';
+}
+
+} // namespace
+
+extern "C" tinyobj_shim_status tinyobj_shim_parse(const char *text, size_t size,
+                                                  const tinyobj_shim_callbacks *callbacks, char *message,
+                                                  size_t message_size)
+{
+    set_message(message, message_size, "");
+    try {
+        context ctx;
+        ctx.callbacks = callbacks;
+        memory_buffer buffer(text, size);
+        std::istream stream(&buffer);
+        tinyobj::callback_t cb;
+        cb.vertex_cb = on_vertex;
+        cb.normal_cb = on_normal;
+        cb.index_cb = on_index;
+        cb.group_cb = on_group;
+        cb.object_cb = on_object;
+        std::string warn, err;
+        // No MaterialReader: vkrt ignores materials, and a missing or broken .mtl must not matter.
+        if (!tinyobj::LoadObjWithCallback(stream, cb, &ctx, nullptr, &warn, &err)) {
+            set_message(message, message_size, err.empty() ? "tinyobjloader failed" : err.c_str());
+            return TINYOBJ_SHIM_PARSE_ERROR;
+        }
+        return TINYOBJ_SHIM_OK;
+    } catch (const std::bad_alloc &) {
+        set_message(message, message_size, "out of memory");
+        return TINYOBJ_SHIM_OUT_OF_MEMORY;
+    } catch (const std::exception &e) {
+        set_message(message, message_size, e.what());
+        return TINYOBJ_SHIM_INTERNAL_ERROR;
+    } catch (...) {
+        set_message(message, message_size, "unknown exception");
+        return TINYOBJ_SHIM_INTERNAL_ERROR;
+    }
+}

@@ -1,0 +1,43 @@
+/* A C view of tinyobjloader's callback parser (tiny_obj_loader.h is C++). The parser calls
+ * back once per statement in file order; nothing is kept, and no C++ exception leaves
+ * tinyobj_shim_parse(). Materials are not read: `mtllib` and `usemtl` are skipped. */
+#ifndef TINYOBJ_SHIM_H
+#define TINYOBJ_SHIM_H
+
+#include <stddef.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* One corner of an `f` statement as written: 1-based, negative = relative to the end of
+ * the list so far, 0 = absent (or not a number). */
+typedef struct tinyobj_shim_corner {
+    int v, vt, vn;
+} tinyobj_shim_corner;
+
+typedef struct tinyobj_shim_callbacks {
+    void *user;
+    void (*vertex)(void *user, float x, float y, float z);          /* `v`  */
+    void (*normal)(void *user, float x, float y, float z);          /* `vn` */
+    void (*face)(void *user, const tinyobj_shim_corner *corners, size_t count); /* `f`, count >= 1 */
+    void (*group)(void *user);                                      /* `o` or `g` */
+} tinyobj_shim_callbacks;
+
+typedef enum tinyobj_shim_status {
+    TINYOBJ_SHIM_OK = 0,
+    TINYOBJ_SHIM_PARSE_ERROR,   /* tinyobjloader rejected the text; message says why */
+    TINYOBJ_SHIM_OUT_OF_MEMORY,
+    TINYOBJ_SHIM_INTERNAL_ERROR /* any other exception; message holds what() */
+} tinyobj_shim_status;
+
+/* Parses size bytes of OBJ text (borrowed for the call; need not end in NUL). On failure a
+ * NUL-terminated reason goes into message (message_size bytes, may be 0). */
+tinyobj_shim_status tinyobj_shim_parse(const char *text, size_t size, const tinyobj_shim_callbacks *callbacks,
+                                       char *message, size_t message_size);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif
