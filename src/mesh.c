@@ -2,7 +2,7 @@
  * normalisation and the choice of loader for a file.
  *
  * Missing vertex normals are angle-weighted averages of the adjacent face normals, after
- * Thürmer and Wüthrich, "Computing vertex normals from polygonal facets" (JGT 3(1), 1998):
+ * Thuermer and Wüthrich, "Computing vertex normals from polygonal facets" (JGT 3(1), 1998):
  * unlike area weighting, the result does not change when a face is split into thinner
  * triangles. */
 #include "mesh.h"

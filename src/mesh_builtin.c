@@ -261,14 +261,15 @@ vkrt_result mesh_make_builtin(core *c, mesh *m)
     const float sphere_radius = 0.6f, box_half = 0.45f;
     /* The lowest point of a torus tipped by angle a is R sin(a) + r below its centre. */
     const float torus_lift = (float)(TORUS_MAJOR * sin(TORUS_TIP_DEGREES * BUILTIN_PI / 180.0) + TORUS_MINOR);
+    const mat4 sphere = mat_mul(tilt, mat_mul(mat_translate(-1.5f, sphere_radius, 0.2f), mat_scale(sphere_radius)));
+    const mat4 torus = mat_mul(tilt, mat_mul(mat_translate(0.0f, torus_lift, -0.2f), mat_rotate_x(TORUS_TIP_DEGREES)));
+    const mat4 box = mat_mul(tilt, mat_mul(mat_translate(1.5f, box_half, 0.2f),
+                                           mat_mul(mat_rotate_y(30.0), mat_scale(box_half))));
     vkrt_result r;
     if ((r = add_ground(c, m, tilt)) != VKRT_OK) goto fail;
-    if ((r = add_sphere(c, m, mat_mul(tilt, mat_mul(mat_translate(-1.5f, sphere_radius, 0.2f), mat_scale(sphere_radius))))) != VKRT_OK)
-        goto fail;
-    if ((r = add_torus(c, m, mat_mul(tilt, mat_mul(mat_translate(0.0f, torus_lift, -0.2f), mat_rotate_x(TORUS_TIP_DEGREES))))) != VKRT_OK)
-        goto fail;
-    if ((r = add_box(c, m, mat_mul(tilt, mat_mul(mat_translate(1.5f, box_half, 0.2f), mat_mul(mat_rotate_y(30.0), mat_scale(box_half)))))) != VKRT_OK)
-        goto fail;
+    if ((r = add_sphere(c, m, sphere)) != VKRT_OK) goto fail;
+    if ((r = add_torus(c, m, torus)) != VKRT_OK) goto fail;
+    if ((r = add_box(c, m, box)) != VKRT_OK) goto fail;
     mesh_update_bounds(m);
     return VKRT_OK;
 fail:

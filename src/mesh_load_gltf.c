@@ -44,7 +44,8 @@ static vkrt_result parse_failure(core *c, const char *path, cgltf_result cr, int
     case cgltf_result_invalid_json:
         return core_fail(c, VKRT_ERROR_PARSE, "%s: invalid glTF JSON", path);
     case cgltf_result_invalid_gltf:
-        return core_fail(c, VKRT_ERROR_PARSE, "%s: invalid glTF (a required property is missing or a reference is out of range)", path);
+        return core_fail(c, VKRT_ERROR_PARSE,
+                         "%s: invalid glTF (a required property is missing or a reference is out of range)", path);
     case cgltf_result_legacy_gltf:
         return core_fail(c, VKRT_ERROR_UNSUPPORTED, "%s: glTF 1.0 is not supported (glTF 2.0 is)", path);
     default:
@@ -289,9 +290,237 @@ done:
     return r;
 }
 
+/* The node hierarchy as child lists: node i's children are child[first[i] .. first[i + 1]). */
+typedef struct gltf_hierarchy {
+    size_t *first;
+    size_t *child;
+} gltf_hierarchy;
+
+static void hierarchy_free(core *c, gltf_hierarchy *h)
+{
+    core_free(c, h->first);
+    core_free(c, h->child);
+    h->first = h->child = NULL;
+}
+
+static vkrt_result hierarchy_from_cgltf(core *c, const char *path, const cgltf_data *data, gltf_hierarchy *h)
+{
+    size_t total = 0;
+    for (cgltf_size i = 0; i < data->nodes_count; i++) total += data->nodes[i].children_count;
+    h->first = core_alloc_array(c, data->nodes_count + 1, sizeof *h->first);
+    h->child = core_alloc_array(c, total, sizeof *h->child);
+    if (!h->first || !h->child) return core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "%s: out of memory", path);
+    size_t n = 0;
+    for (cgltf_size i = 0; i < data->nodes_count; i++) {
+        h->first[i] = n;
+        for (cgltf_size k = 0; k < data->nodes[i].children_count; k++)
+            h->child[n++] = (size_t)(data->nodes[i].children[k] - data->nodes);
+    }
+    h->first[data->nodes_count] = n;
+    return VKRT_OK;
+}
+
+/* ---- nodes with several parents ----------------------------------------------------------
+ * cgltf 1.12 refuses a file that lists a node as the child of two nodes (glTF-Validator's
+ * NODE_PARENT_OVERRIDE), and exporters write exactly that to instance a subtree. Such a file
+ * is parsed a second time with its "children" keys renamed to a key cgltf skips, and the
+ * child lists are read from the JSON here. The JSON has then already passed cgltf's parser;
+ * this reader still checks every byte it reads. */
+
+#define HIDDEN_CHILDREN "\"chIldren\"" /* same length as "children", so GLB offsets hold */
+#define JSON_MAX_DEPTH 64              /* deeper nesting is no glTF vkrt can use */
+
+typedef struct json_reader {
+    const char *p, *end;
+} json_reader;
+
+static void json_space(json_reader *j)
+{
+    while (j->p < j->end && (*j->p == ' ' || *j->p == '\t' || *j->p == '\n' || *j->p == '\r')) j->p++;
+}
+
+static bool json_expect(json_reader *j, char ch)
+{
+    json_space(j);
+    if (j->p >= j->end || *j->p != ch) return false;
+    j->p++;
+    return true;
+}
+
+/* A string's raw bytes between the quotes (escapes left as written, as cgltf compares keys). */
+static bool json_string(json_reader *j, const char **s, size_t *n)
+{
+    if (!json_expect(j, '"')) return false;
+    const char *start = j->p;
+    while (j->p < j->end && *j->p != '"') j->p += *j->p == '\\' ? 2 : 1;
+    if (j->p >= j->end) return false;
+    *s = start;
+    *n = (size_t)(j->p - start);
+    j->p++;
+    return true;
+}
+
+static bool json_skip(json_reader *j, int depth)
+{
+    json_space(j);
+    if (j->p >= j->end || depth > JSON_MAX_DEPTH) return false;
+    char ch = *j->p;
+    if (ch == '"') {
+        const char *s;
+        size_t n;
+        return json_string(j, &s, &n);
+    }
+    if (ch == '{' || ch == '[') {
+        char close = ch == '{' ? '}' : ']';
+        j->p++;
+        if (json_expect(j, close)) return true;
+        do {
+            if (ch == '{') {
+                const char *s;
+                size_t n;
+                if (!json_string(j, &s, &n) || !json_expect(j, ':')) return false;
+            }
+            if (!json_skip(j, depth + 1)) return false;
+        } while (json_expect(j, ','));
+        return json_expect(j, close);
+    }
+    /* number, true, false, null */
+    const char *start = j->p;
+    while (j->p < j->end && *j->p != ',' && *j->p != '}' && *j->p != ']' && *j->p != ' ' && *j->p != '\n' &&
+           *j->p != '\r' && *j->p != '\t')
+        j->p++;
+    return j->p > start;
+}
+
+static bool json_key_is(const char *s, size_t n, const char *quoted)
+{
+    size_t q = strlen(quoted) - 2;
+    return n == q && memcmp(s, quoted + 1, q) == 0;
+}
+
+/* Reads nodes[i].<hidden children> into h; false when the JSON is not as cgltf read it. */
+static bool read_hidden_children(core *c, const char *json, size_t size, size_t nodes_count, gltf_hierarchy *h,
+                                 bool *out_of_memory)
+{
+    size_t capacity = 0, used = 0, node = 0;
+    json_reader j = { json, json + size };
+    h->first = core_calloc_array(c, nodes_count + 1, sizeof *h->first);
+    if (!h->first) return !(*out_of_memory = true);
+    if (!json_expect(&j, '{')) return false;
+    if (json_expect(&j, '}')) return nodes_count == 0;
+    do {
+        const char *key;
+        size_t n;
+        if (!json_string(&j, &key, &n) || !json_expect(&j, ':')) return false;
+        if (!json_key_is(key, n, "\"nodes\"")) {
+            if (!json_skip(&j, 1)) return false;
+            continue;
+        }
+        if (!json_expect(&j, '[')) return false;
+        if (json_expect(&j, ']')) continue;
+        do {
+            if (node >= nodes_count || !json_expect(&j, '{')) return false;
+            h->first[node] = used;
+            if (!json_expect(&j, '}')) {
+                do {
+                    if (!json_string(&j, &key, &n) || !json_expect(&j, ':')) return false;
+                    if (!json_key_is(key, n, HIDDEN_CHILDREN)) {
+                        if (!json_skip(&j, 2)) return false;
+                        continue;
+                    }
+                    if (!json_expect(&j, '[')) return false;
+                    if (json_expect(&j, ']')) continue;
+                    do {
+                        json_space(&j);
+                        size_t v = 0, digits = 0;
+                        while (j.p < j.end && *j.p >= '0' && *j.p <= '9' && digits < 12) {
+                            v = v * 10 + (size_t)(*j.p++ - '0');
+                            digits++;
+                        }
+                        if (!digits || v >= nodes_count) return false;
+                        if (core_grow(c, (void **)&h->child, &capacity, used + 1, sizeof *h->child))
+                            return !(*out_of_memory = true);
+                        h->child[used++] = v;
+                    } while (json_expect(&j, ','));
+                    if (!json_expect(&j, ']')) return false;
+                } while (json_expect(&j, ','));
+                if (!json_expect(&j, '}')) return false;
+            }
+            node++;
+        } while (json_expect(&j, ','));
+        if (!json_expect(&j, ']')) return false;
+    } while (json_expect(&j, ','));
+    if (!json_expect(&j, '}') || node != nodes_count) return false;
+    h->first[nodes_count] = used;
+    if (!h->child && !(h->child = core_alloc(c, 1))) return !(*out_of_memory = true);
+    return true;
+}
+
+static vkrt_result read_whole_file(core *c, const char *path, char **out, size_t *out_size)
+{
+    FILE *f = fopen(path, "rb");
+    if (!f) return core_fail(c, VKRT_ERROR_IO, "%s: cannot open: %s", path, strerror(errno));
+    long size = -1;
+    if (fseek(f, 0, SEEK_END) == 0) size = ftell(f);
+    char *buf = size >= 0 && fseek(f, 0, SEEK_SET) == 0 ? core_alloc(c, (size_t)size) : NULL;
+    bool ok = buf && fread(buf, 1, (size_t)size, f) == (size_t)size;
+    fclose(f);
+    if (!ok) {
+        core_free(c, buf);
+        return buf || size < 0 ? core_fail(c, VKRT_ERROR_IO, "%s: cannot read the file", path)
+                               : core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "%s: out of memory reading the file", path);
+    }
+    *out = buf;
+    *out_size = (size_t)size;
+    return VKRT_OK;
+}
+
+static uint32_t read_u32le(const char *p)
+{
+    const unsigned char *u = (const unsigned char *)p;
+    return (uint32_t)u[0] | (uint32_t)u[1] << 8 | (uint32_t)u[2] << 16 | (uint32_t)u[3] << 24;
+}
+
+/* Parses path again with its child lists hidden from cgltf. *out_file holds the file, which
+ * a GLB's binary chunk points into, until cgltf_free(). When the file still does not parse,
+ * returns VKRT_OK with *out_data NULL, and the caller reports the first failure. */
+static vkrt_result parse_with_shared_children(core *c, const char *path, const cgltf_options *options,
+                                              cgltf_data **out_data, char **out_file, gltf_hierarchy *h)
+{
+    char *file = NULL;
+    size_t size = 0;
+    vkrt_result r = read_whole_file(c, path, &file, &size);
+    if (r != VKRT_OK) return r;
+    *out_file = file;
+    char *json = file;
+    size_t json_size = size;
+    if (size >= 20 && memcmp(file, "glTF", 4) == 0) {
+        json = file + 20;
+        json_size = read_u32le(file + 12);
+        if (json_size > size - 20 || read_u32le(file + 16) != 0x4E4F534Au) return VKRT_OK; /* not a JSON chunk */
+    }
+    const size_t key = sizeof HIDDEN_CHILDREN - 1;
+    for (size_t i = 0; i + key <= json_size; i++)
+        if (memcmp(json + i, "\"children\"", key) == 0) memcpy(json + i, HIDDEN_CHILDREN, key);
+    cgltf_result cr = cgltf_parse(options, file, size, out_data);
+    if (cr == cgltf_result_out_of_memory)
+        return core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "%s: out of memory parsing glTF", path);
+    if (cr != cgltf_result_success) {
+        *out_data = NULL;
+        return VKRT_OK;
+    }
+    bool oom = false;
+    if (!read_hidden_children(c, json, json_size, (*out_data)->nodes_count, h, &oom))
+        return oom ? core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "%s: out of memory", path)
+                   : core_fail(c, VKRT_ERROR_PARSE, "%s: cannot read the node hierarchy", path);
+    return VKRT_OK;
+}
+
+/* ---- the walk ---------------------------------------------------------------------------- */
+
 typedef struct walk_frame {
-    const cgltf_node *node;
-    cgltf_size next_child;
+    size_t node;
+    size_t next_child; /* position in the hierarchy's child array */
     float world[16];
 } walk_frame;
 
@@ -305,7 +534,7 @@ static void multiply(const float *a, const float *b, float *out)
         }
 }
 
-static vkrt_result walk_nodes(gltf_walk *w, cgltf_node *const *roots, size_t root_count)
+static vkrt_result walk_nodes(gltf_walk *w, const gltf_hierarchy *h, const size_t *roots, size_t root_count)
 {
     core *c = w->c;
     const cgltf_data *data = w->data;
@@ -321,14 +550,14 @@ static vkrt_result walk_nodes(gltf_walk *w, cgltf_node *const *roots, size_t roo
     static const float identity[16] = { 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1 };
     for (size_t ri = 0; ri < root_count; ri++) {
         size_t depth = 0;
-        const cgltf_node *next = roots[ri];
+        size_t next = roots[ri];
+        bool have_next = true;
         const float *parent_world = identity;
         for (;;) {
-            if (next) {
-                size_t index = (size_t)(next - data->nodes);
-                if (on_path[index]) {
+            if (have_next) {
+                if (on_path[next]) {
                     r = core_fail(c, VKRT_ERROR_PARSE, "%s: node %zu is its own ancestor (a cycle in the hierarchy)",
-                                  w->path, index);
+                                  w->path, next);
                     goto done;
                 }
                 if (++visits > GLTF_MAX_NODE_VISITS) {
@@ -336,17 +565,18 @@ static vkrt_result walk_nodes(gltf_walk *w, cgltf_node *const *roots, size_t roo
                                   w->path, GLTF_MAX_NODE_VISITS);
                     goto done;
                 }
+                const cgltf_node *node = &data->nodes[next];
                 walk_frame *f = &stack[depth++];
                 f->node = next;
-                f->next_child = 0;
+                f->next_child = h->first[next];
                 float local[16];
-                cgltf_node_transform_local(next, local);
+                cgltf_node_transform_local(node, local);
                 multiply(parent_world, local, f->world);
-                on_path[index] = true;
-                if (next->mesh) {
-                    const cgltf_mesh *mesh_ = next->mesh;
+                on_path[next] = true;
+                if (node->mesh) {
+                    const cgltf_mesh *mesh_ = node->mesh;
                     for (cgltf_size p = 0; p < mesh_->primitives_count; p++) {
-                        r = append_primitive(w, &mesh_->primitives[p], (size_t)(mesh_ - data->meshes), (size_t)p, index,
+                        r = append_primitive(w, &mesh_->primitives[p], (size_t)(mesh_ - data->meshes), (size_t)p, next,
                                              f->world);
                         if (r != VKRT_OK) goto done;
                     }
@@ -354,13 +584,14 @@ static vkrt_result walk_nodes(gltf_walk *w, cgltf_node *const *roots, size_t roo
             }
             if (depth == 0) break;
             walk_frame *top = &stack[depth - 1];
-            if (top->next_child < top->node->children_count) {
-                next = top->node->children[top->next_child++];
+            if (top->next_child < h->first[top->node + 1]) {
+                next = h->child[top->next_child++];
+                have_next = true;
                 parent_world = top->world;
             } else {
-                on_path[(size_t)(top->node - data->nodes)] = false;
+                on_path[top->node] = false;
                 depth--;
-                next = NULL;
+                have_next = false;
             }
         }
     }
@@ -376,12 +607,24 @@ vkrt_result mesh_load_gltf(core *c, const char *path, mesh *m)
     memset(m, 0, sizeof *m);
     cgltf_options options = { .memory = { .alloc_func = gltf_alloc, .free_func = gltf_free, .user_data = c } };
     cgltf_data *data = NULL;
-    cgltf_node **roots = NULL;
+    char *file = NULL; /* only for a file with shared children */
+    gltf_hierarchy h = { 0 };
+    size_t *roots = NULL;
     errno = 0;
     cgltf_result cr = cgltf_parse_file(&options, path, &data);
+    int parse_errno = errno;
     vkrt_result r;
-    if (cr != cgltf_result_success) {
-        r = parse_failure(c, path, cr, errno);
+    if (cr == cgltf_result_invalid_gltf) {
+        data = NULL;
+        if ((r = parse_with_shared_children(c, path, &options, &data, &file, &h)) != VKRT_OK) goto fail;
+        if (!data) {
+            r = parse_failure(c, path, cr, 0);
+            goto fail;
+        }
+    } else if (cr != cgltf_result_success) {
+        r = parse_failure(c, path, cr, parse_errno);
+        goto fail;
+    } else if ((r = hierarchy_from_cgltf(c, path, data, &h)) != VKRT_OK) {
         goto fail;
     }
     /* Before the buffers: a Draco-only file may have none vkrt could load anyway. */
@@ -399,24 +642,23 @@ vkrt_result mesh_load_gltf(core *c, const char *path, mesh *m)
     }
 
     const cgltf_scene *scene = data->scene ? data->scene : data->scenes_count ? &data->scenes[0] : NULL;
-    cgltf_node *const *root_list;
     size_t root_count = 0;
+    roots = core_alloc_array(c, scene ? scene->nodes_count : data->nodes_count, sizeof *roots);
+    if (!roots) {
+        r = core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "%s: out of memory", path);
+        goto fail;
+    }
     if (scene) {
-        root_list = scene->nodes;
-        root_count = scene->nodes_count;
+        for (cgltf_size i = 0; i < scene->nodes_count; i++) roots[root_count++] = (size_t)(scene->nodes[i] - data->nodes);
     } else {
-        /* No scene at all: every node nothing lists as a child. */
-        roots = core_alloc_array(c, data->nodes_count, sizeof *roots);
-        if (!roots) {
-            r = core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "%s: out of memory", path);
-            goto fail;
-        }
+        /* No scene at all: every node that no node lists as a child, in index order. */
+        for (cgltf_size i = 0; i < data->nodes_count; i++) roots[i] = 1;
+        for (size_t k = 0; k < h.first[data->nodes_count]; k++) roots[h.child[k]] = 0;
         for (cgltf_size i = 0; i < data->nodes_count; i++)
-            if (!data->nodes[i].parent) roots[root_count++] = &data->nodes[i];
-        root_list = roots;
+            if (roots[i]) roots[root_count++] = i;
     }
     gltf_walk w = { .c = c, .path = path, .data = data, .m = m };
-    if ((r = walk_nodes(&w, root_list, root_count)) != VKRT_OK) goto fail;
+    if ((r = walk_nodes(&w, &h, roots, root_count)) != VKRT_OK) goto fail;
     if (m->tri_count == 0) {
         if (w.skipped_primitives && !w.triangle_primitives)
             r = core_fail(c, VKRT_ERROR_EMPTY_SCENE, "%s: has only points or lines (%zu primitives), no triangles", path,
@@ -425,13 +667,15 @@ vkrt_result mesh_load_gltf(core *c, const char *path, mesh *m)
             r = core_fail(c, VKRT_ERROR_EMPTY_SCENE, "%s: the scene has no triangles", path);
         goto fail;
     }
-    core_free(c, roots);
-    cgltf_free(data);
     mesh_update_bounds(m);
-    return VKRT_OK;
+    r = VKRT_OK;
+    goto done;
 fail:
-    core_free(c, roots);
-    cgltf_free(data);
     mesh_destroy(c, m);
+done:
+    core_free(c, roots);
+    hierarchy_free(c, &h);
+    cgltf_free(data);
+    core_free(c, file);
     return r;
 }

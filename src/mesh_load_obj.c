@@ -230,22 +230,17 @@ static void on_face(void *user, const tinyobj_shim_corner *corners, size_t count
                                           s->path, line, face, k + 1, corners[k].v));
             return;
         }
+        /* A normal index that names no normal counts as none (tinyobjloader itself only
+         * warns; files in the wild reference normals they never define): the face then gets
+         * computed normals, and only positions must be right. */
         int64_t vn;
-        if (corners[k].vn == 0) all_normals = false;
-        else if (resolve(corners[k].vn, s->normal_count, &vn) && vn < 0) {
-            size_t line = statement_line(s->text, s->size, "f", face);
-            fail_in_callback(s, core_fail(s->c, VKRT_ERROR_INVALID_GEOMETRY,
-                                          "%s: line %zu: face %zu: corner %zu has relative normal index %d, before "
-                                          "the first normal",
-                                          s->path, line, face, k + 1, corners[k].vn));
-            return;
-        }
+        if (corners[k].vn == 0 || (resolve(corners[k].vn, s->normal_count, &vn) && vn < 0)) all_normals = false;
     }
     if (core_grow(s->c, (void **)&s->tris, &s->tri_capacity, s->tri_count + (count - 2), sizeof *s->tris)) {
         fail_in_callback(s, core_fail(s->c, VKRT_ERROR_OUT_OF_MEMORY, "%s: out of memory reading faces", s->path));
         return;
     }
-    int64_t v0, vn0 = -1;
+    int64_t v0 = -1, vn0 = -1; /* resolve() set them for every corner above */
     resolve(corners[0].v, s->position_count, &v0);
     if (all_normals) resolve(corners[0].vn, s->normal_count, &vn0);
     for (size_t k = 1; k + 1 < count; k++) {
@@ -368,13 +363,22 @@ static vkrt_result check_indices(obj_state *s)
                                  "%s: line %zu: face %zu refers to vertex %lld, but the file has %zu vertices", s->path,
                                  statement_line(s->text, s->size, "f", tri->face), tri->face,
                                  (long long)tri->v[k] + 1, s->position_count);
-            if (tri->vn[k] < -1 || tri->vn[k] >= (int64_t)s->normal_count)
-                return core_fail(s->c, VKRT_ERROR_INVALID_GEOMETRY,
-                                 "%s: line %zu: face %zu refers to normal %lld, but the file has %zu normals", s->path,
-                                 statement_line(s->text, s->size, "f", tri->face), tri->face,
-                                 (long long)tri->vn[k] + 1, s->normal_count);
         }
     }
+    /* Normals may be defined after the face that names them, so faces naming a normal past
+     * the end are known only now; they fall back to computed normals (see on_face). */
+    size_t dropped = 0;
+    for (size_t t = 0; t < s->tri_count; t++) {
+        obj_tri *tri = &s->tris[t];
+        if (tri->vn[0] >= (int64_t)s->normal_count || tri->vn[1] >= (int64_t)s->normal_count ||
+            tri->vn[2] >= (int64_t)s->normal_count) {
+            tri->vn[0] = tri->vn[1] = tri->vn[2] = -1;
+            dropped++;
+        }
+    }
+    if (dropped)
+        core_log(s->c, VKRT_LOG_WARN, "%s: %zu triangles name normals the file does not define; computed instead",
+                 s->path, dropped);
     return VKRT_OK;
 }
 

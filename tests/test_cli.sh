@@ -107,13 +107,7 @@ printf 'v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 7\n' >"$tmp/index.obj"
 bad_input "index out of range" "$tmp/index.obj" "index|range"
 printf 'v 0 0 0\nv 1 0 0\nv 0 1 0\nl 1 2 3\np 1\n' >"$tmp/lines.obj"
 bad_input "only points and lines" "$tmp/lines.obj" "points|lines"
-cat >"$tmp/draco.gltf" <<'JSON'
-{"asset":{"version":"2.0"},"extensionsUsed":["KHR_draco_mesh_compression"],
- "extensionsRequired":["KHR_draco_mesh_compression"],
- "meshes":[{"primitives":[{"attributes":{},"extensions":{"KHR_draco_mesh_compression":{"bufferView":0,"attributes":{"POSITION":0}}}}]}],
- "nodes":[{"mesh":0}],"scenes":[{"nodes":[0]}],"scene":0}
-JSON
-bad_input "glTF requiring an unsupported extension" "$tmp/draco.gltf" "KHR_draco_mesh_compression"
+bad_input "glTF requiring an unsupported extension" tests/data/draco_required.gltf "KHR_draco_mesh_compression"
 cp "$models/gltf/assimp/Mesh_PrimitiveMode/Mesh_PrimitiveMode_00.gltf" "$models/gltf/assimp/Mesh_PrimitiveMode/Mesh_PrimitiveMode_00.bin" "$tmp/"
 bad_input "glTF with only points" "$tmp/Mesh_PrimitiveMode_00.gltf" "points|lines|no triangles"
 

@@ -332,6 +332,25 @@ static void gpu_shared_layouts_match_c(void)
     vk_buffer_destroy(vk, &out);
 }
 
+/* The detector behind every other test: a deliberate misuse (a buffer with no usage flags,
+ * VUID-VkBufferCreateInfo-usage-requiredbitmask) must reach the count. */
+static void gpu_validation_messages_are_counted(void)
+{
+    vkrt_context *probe = NULL;
+    unsigned before = log_errors;
+    vkrt_context_desc desc = { .backend = VKRT_BACKEND_GPU, .validation = true, .log = on_log };
+    CHECK(vkrt_context_create(&desc, &probe) == VKRT_OK);
+    if (!probe) return;
+    fprintf(stderr, "  (one validation error expected next)\n");
+    VkBufferCreateInfo info = { .sType = VK_STRUCTURE_TYPE_BUFFER_CREATE_INFO, .size = 64, .usage = 0 };
+    VkBuffer buffer = VK_NULL_HANDLE;
+    vkCreateBuffer(probe->vk->device, &info, NULL, &buffer);
+    if (buffer) vkDestroyBuffer(probe->vk->device, buffer, NULL);
+    CHECK(vkrt_context_validation_messages(probe) >= 1);
+    vkrt_context_destroy(probe);
+    log_errors = before; /* expected: not a failure of this run */
+}
+
 int main(void)
 {
     vkrt_context_desc desc = { .backend = VKRT_BACKEND_GPU, .log = on_log, .validation = true };
@@ -350,6 +369,7 @@ int main(void)
     CHECK(r == VKRT_OK);
     if (r != VKRT_OK) return check_exit();
 
+    RUN(gpu_validation_messages_are_counted);
     RUN(gpu_shared_layouts_match_c);
     RUN(gpu_every_pipeline_variant_runs);
     RUN(gpu_matches_cpu_reference);

@@ -260,8 +260,17 @@ static void gltf_loads_external_bin_base64_and_glb(void)
     CHECK_MSG(load(MODEL("gltf/draco/Box/Box.gltf"), &a) == VKRT_OK, "%s", g_core.last_error);
     CHECK_MSG(load(MODEL("gltf/draco/Box/Box.glb"), &b) == VKRT_OK, "%s", g_core.last_error);
     CHECK_EQ_U64(a.tri_count, 12);
-    CHECK(same_triangles(&a, &b, 0, true));
+    CHECK_EQ_U64(b.tri_count, 12);
     check_sane(&a, "Box.gltf");
+    check_sane(&b, "Box.glb");
+    /* The unit box under each file's root matrix: Box.gltf moves it to z = 2, this Box.glb
+     * turns it about x, which leaves its bounds. */
+    for (int j = 0; j < 3; j++) {
+        CHECK_NEAR(a.bounds_min[j], j == 2 ? 1.5 : -0.5, 1e-6);
+        CHECK_NEAR(a.bounds_max[j], j == 2 ? 2.5 : 0.5, 1e-6);
+        CHECK_NEAR(b.bounds_min[j], -0.5, 1e-6);
+        CHECK_NEAR(b.bounds_max[j], 0.5, 1e-6);
+    }
     mesh_destroy(&g_core, &a);
     mesh_destroy(&g_core, &b);
     expect_triangles(MODEL("gltf/assimp/BoxTextured-Embedded/BoxTextured.gltf"), 12);
@@ -429,9 +438,8 @@ static void append_transforms_normals_by_the_inverse_transpose(void)
         CHECK(r == VKRT_OK);
         check_corner(&m, 0, 0, 2, 0, 0, 0);
         check_corner(&m, 0, 2, 2, 0, 1, 0);
-        /* Winding (1,0,0) (0,1,0) (1,0,1): cross gives the -(1,1,0) side. */
-        float sign = given ? 1.0f : -1.0f;
-        for (int k = 0; k < 3; k++) check_normal(&m, 0, k, sign * e, sign * 2 * e, 0, 1e-6);
+        /* Winding (1,0,0) (0,1,0) (1,0,1) faces the +(1,1,0) side, so given and computed agree. */
+        for (int k = 0; k < 3; k++) check_normal(&m, 0, k, e, 2 * e, 0, 1e-6);
         mesh_destroy(&g_core, &m);
     }
 }
@@ -738,12 +746,13 @@ static void builtin_scene_is_large_finite_unit_normalled_and_outward(void)
 
 typedef struct failing_allocator {
     long allocations, live, fail_at; /* fail_at < 0: never */
+    size_t min_size;                 /* only allocations this large count and fail */
 } failing_allocator;
 
 static void *failing_alloc(void *user, size_t size)
 {
     failing_allocator *a = user;
-    if (a->fail_at >= 0 && a->allocations++ == a->fail_at) return NULL;
+    if (size >= a->min_size && a->fail_at >= 0 && a->allocations++ == a->fail_at) return NULL;
     void *p = malloc(size);
     if (p) a->live++;
     return p;
@@ -756,23 +765,35 @@ static void failing_free(void *user, void *pointer)
     free(pointer);
 }
 
+/* cgltf 1.12 itself crashes when an allocation fails half-way through parsing (it records
+ * an attribute count before allocating the attributes, then frees count entries of a NULL
+ * array), so glTF files only have their large allocations failed: the file and token
+ * buffers inside cgltf, which fail cleanly, and vkrt's own arrays. */
+#define GLTF_FAILABLE_SIZE 4096
+
 static void every_allocation_failure_is_out_of_memory_and_leaks_nothing(void)
 {
-    static const char *const files[] = { DATA("groups.obj"), DATA("pair.gltf"), MODEL("gltf/draco/Box/Box.gltf"),
-                                         MODEL("gltf/draco/CubeScaledInstances/cube_att.gltf"), NULL };
-    for (size_t i = 0; i < sizeof files / sizeof files[0]; i++) {
+    static const struct {
+        const char *path; /* NULL: the built-in scene */
+        size_t min_size;
+    } cases[] = { { DATA("groups.obj"), 0 }, { MODEL("obj/draco/octagon.obj"), 0 },
+                  { MODEL("gltf/draco/Duck/Duck.glb"), GLTF_FAILABLE_SIZE },
+                  { MODEL("gltf/draco/CesiumMilkTruck/CesiumMilkTruck.gltf"), GLTF_FAILABLE_SIZE },
+                  { MODEL("gltf/draco/CubeScaledInstances/cube_att.gltf"), 256 },
+                  { NULL, 0 } };
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+        const char *name = cases[i].path ? cases[i].path : "built-in scene";
         for (long n = 0;; n++) {
-            failing_allocator a = { .fail_at = n };
+            failing_allocator a = { .fail_at = n, .min_size = cases[i].min_size };
             core c;
             core_init(&c, &(vkrt_allocator){ .alloc = failing_alloc, .free = failing_free, .user = &a }, NULL, NULL);
             mesh m;
-            vkrt_result r = files[i] ? mesh_load(&c, files[i], &m) : mesh_make_builtin(&c, &m);
-            const char *name = files[i] ? files[i] : "builtin";
+            vkrt_result r = cases[i].path ? mesh_load(&c, cases[i].path, &m) : mesh_make_builtin(&c, &m);
             if (r == VKRT_OK) {
                 CHECK_MSG(m.tri_count > 0, "%s", name);
                 mesh_destroy(&c, &m);
                 CHECK_MSG(a.live == 0, "%s: %ld allocations leaked", name, a.live);
-                CHECK_MSG(n > 0, "%s", name);
+                CHECK_MSG(n > 0, "%s: no allocation was failed", name);
                 break;
             }
             CHECK_MSG(r == VKRT_ERROR_OUT_OF_MEMORY, "%s: failing allocation %ld gave %s (%s)", name, n,
