@@ -49,11 +49,13 @@ static VKAPI_ATTR VkBool32 VKAPI_CALL on_debug_message(VkDebugUtilsMessageSeveri
 {
     vk_context *vk = user;
     bool error = severity & VK_DEBUG_UTILS_MESSAGE_SEVERITY_ERROR_BIT_EXT;
-    /* Validation findings are counted so tests can fail on any; loader chatter is only logged. */
-    if (types & (VK_DEBUG_UTILS_MESSAGE_TYPE_VALIDATION_BIT_EXT | VK_DEBUG_UTILS_MESSAGE_TYPE_PERFORMANCE_BIT_EXT))
-        vk->validation_messages++;
-    core_log(vk->core, error ? VKRT_LOG_ERROR : VKRT_LOG_WARN, "Vulkan validation: %s",
-             data && data->pMessage ? data->pMessage : "(no message)");
+    /* Validation findings are counted so tests can fail on any; the loader's own messages
+     * (general type: a missing driver file, say) only explain a failure already reported. */
+    bool validation =
+        types & (VK_DEBUG_UTILS_MESSAGE_TYPE_VALIDATION_BIT_EXT | VK_DEBUG_UTILS_MESSAGE_TYPE_PERFORMANCE_BIT_EXT);
+    if (validation) vk->validation_messages++;
+    core_log(vk->core, validation ? (error ? VKRT_LOG_ERROR : VKRT_LOG_WARN) : VKRT_LOG_INFO, "Vulkan %s: %s",
+             validation ? "validation" : "loader", data && data->pMessage ? data->pMessage : "(no message)");
     return VK_FALSE;
 }
 

@@ -82,6 +82,17 @@ expect "render on --device 0" 0 "$vkrt" render --device 0 -o "$tmp/d0.png" --siz
 expect "--device out of range" 4 "$vkrt" render --device 99 -o "$tmp/d99.png" --size 16x16
 [ ! -e "$tmp/d99.png" ] && ok "no file after a device error" || bad "no file after a device error"
 
+# no Vulkan device at all (the loader finds no driver): a device error, no file; the CPU
+# backend needs no Vulkan and still renders
+VK_ICD_FILENAMES=/nonexistent/icd.json VK_DRIVER_FILES=/nonexistent/icd.json \
+  "$vkrt" render -o "$tmp/nodev.png" --size 8x8 >"$tmp/out" 2>"$tmp/err"
+got=$?
+if [ "$got" -eq 4 ] && grep -qiE 'no vulkan (driver|device)' "$tmp/err" && [ ! -e "$tmp/nodev.png" ]; then
+  ok "no Vulkan driver: exit 4, a clear message, no file"
+else bad "no Vulkan driver: exit $got"; fi
+expect "no Vulkan driver: the CPU backend still renders" 0 env VK_ICD_FILENAMES=/nonexistent/icd.json \
+  VK_DRIVER_FILES=/nonexistent/icd.json "$vkrt" render --backend cpu -o "$tmp/cpu_nodev.png" --size 8x8
+
 # --- usage errors -------------------------------------------------------------------------
 expect "--help" 0 "$vkrt" render --help
 expect "unknown option" 2 "$vkrt" render --frobnicate
