@@ -10,6 +10,7 @@ layout(std430, set = 0, binding = 0) readonly buffer Nodes { vkrt_gpu_node nodes
 layout(std430, set = 0, binding = 1) readonly buffer Tris { vkrt_gpu_tri tris[]; };
 layout(std430, set = 0, binding = 2) readonly buffer Hits { vkrt_gpu_hit hits[]; };
 layout(std430, set = 0, binding = 3) writeonly buffer Words { uint words[]; };
+layout(std430, set = 0, binding = 4) readonly buffer Rays { vkrt_gpu_ray rays[]; };
 layout(push_constant) uniform PushBlock { vkrt_gpu_push p; };
 
 uint k = 0;
@@ -26,6 +27,8 @@ void main()
     put(t.v0); put(t.prim_id); put(t.v1); put(t.n0); put(t.v2); put(t.n1); put(t.face_n); put(t.n2);
     vkrt_gpu_hit h = hits[1];
     put(h.t); put(h.tri); put(h.u); put(h.v);
+    vkrt_gpu_ray r = rays[1];
+    put(r.origin); put(r.tmin); put(r.dir); put(r.tmax);
     put(p.eye); put(p.width); put(p.right); put(p.height); put(p.up); put(p.tile_x); put(p.forward);
     put(p.tile_y); put(p.tile_width); put(p.tile_height); put(p.tri_first); put(p.tri_end); put(p.tri_total);
     put(p.last_chunk); put(p.pad0); put(p.pad1);

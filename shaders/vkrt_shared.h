@@ -97,6 +97,14 @@ VKRT_STRUCT(vkrt_gpu_hit) {
     float v;               /* offset 12 */
 };
 
+/* A ray for arbitrary-ray tracing (vkrt_trace_rays), 32 bytes, identical to vkrt_ray. */
+VKRT_STRUCT(vkrt_gpu_ray) {
+    VKRT_FLOAT3 origin;    /* offset  0 */
+    float tmin;            /* offset 12 */
+    VKRT_FLOAT3 dir;       /* offset 16 */
+    float tmax;            /* offset 28; 0 means +infinity */
+};
+
 /* Push constants of trace.comp, 96 bytes (Vulkan guarantees 128).
  * Primary ray through pixel (x, y), with sx = 2 (x + 0.5) / width - 1 and
  * sy = 1 - 2 (y + 0.5) / height: normalize(forward + sx * right + sy * up). */
@@ -134,6 +142,8 @@ _Static_assert(offsetof(vkrt_gpu_tri, n1) == 44, "vkrt_gpu_tri.n1 must match std
 _Static_assert(offsetof(vkrt_gpu_tri, face_n) == 48, "vkrt_gpu_tri.face_n must match std430");
 _Static_assert(offsetof(vkrt_gpu_tri, n2) == 60, "vkrt_gpu_tri.n2 must match std430");
 _Static_assert(sizeof(vkrt_gpu_hit) == 16, "vkrt_gpu_hit must match std430");
+_Static_assert(sizeof(vkrt_gpu_ray) == 32, "vkrt_gpu_ray must match std430");
+_Static_assert(offsetof(vkrt_gpu_ray, dir) == 16, "vkrt_gpu_ray.dir must match std430");
 _Static_assert(sizeof(vkrt_gpu_push) == 96, "vkrt_gpu_push must match the push-constant range");
 _Static_assert(offsetof(vkrt_gpu_push, right) == 16, "vkrt_gpu_push.right must match std430");
 _Static_assert(offsetof(vkrt_gpu_push, up) == 32, "vkrt_gpu_push.up must match std430");

@@ -1,5 +1,6 @@
 /* Public entry points: validate the caller's input, fill defaults, call the modules. */
 #include <math.h>
+#include <stdio.h>
 #include <string.h>
 #include <unistd.h>
 
@@ -120,6 +121,34 @@ static void fill_stats(vkrt_scene *s, const mesh *m, double load_ms)
     memcpy(st->bounds_max, m->bounds_max, sizeof st->bounds_max);
 }
 
+/* The caller's arrays go through the same validation, normal generation and transform as a
+ * file's primitives. */
+static vkrt_result meshes_from_memory(core *c, const vkrt_scene_desc *d, mesh *m)
+{
+    if (!d->meshes) return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "vkrt_scene_desc.meshes is NULL but mesh_count is %u", d->mesh_count);
+    for (uint32_t i = 0; i < d->mesh_count; i++) {
+        const vkrt_mesh_desc *md = &d->meshes[i];
+        char what[48];
+        snprintf(what, sizeof what, "vkrt_scene_desc.meshes[%u]", i);
+        if (!md->positions && md->vertex_count) return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "%s.positions is NULL", what);
+        mesh_primitive p = {
+            .positions = md->positions,
+            .vertex_count = md->vertex_count,
+            .indices = md->indices,
+            .index_count = md->index_count,
+            .normals = md->normals,
+            .transform = md->transform,
+        };
+        vkrt_result r = mesh_append_indexed(c, m, &p, "in-memory scene", what);
+        if (r != VKRT_OK) {
+            mesh_destroy(c, m);
+            return r;
+        }
+    }
+    if (m->tri_count == 0) return core_fail(c, VKRT_ERROR_EMPTY_SCENE, "in-memory scene: the meshes hold no triangles");
+    return VKRT_OK;
+}
+
 vkrt_result vkrt_scene_create(vkrt_context *ctx, const vkrt_scene_desc *desc, vkrt_scene **out_scene)
 {
     if (!ctx) return VKRT_ERROR_INVALID_ARGUMENT;
@@ -140,7 +169,9 @@ vkrt_result vkrt_scene_create(vkrt_context *ctx, const vkrt_scene_desc *desc, vk
     }
     s->ctx = ctx;
     double t0 = core_now_ms();
-    r = d.path ? mesh_load(c, d.path, &m) : mesh_make_builtin(c, &m);
+    if (d.path) r = mesh_load(c, d.path, &m);
+    else if (d.mesh_count) r = meshes_from_memory(c, &d, &m);
+    else r = mesh_make_builtin(c, &m);
     if (r != VKRT_OK) goto fail;
     if (!d.keep_world_coordinates) mesh_normalize(&m);
     else mesh_update_bounds(&m);

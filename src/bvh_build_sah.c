@@ -28,17 +28,16 @@
  *
  * Memory: one array of triangle references (box + index, 32 bytes each) that is partitioned
  * in place, and the node array at its upper bound of 2N - 1, shrunk to size at the end. No
- * allocation per node; children are allocated as adjacent pairs. */
-#include <float.h>
+ * allocation per node; children are allocated as adjacent pairs. The allocation, task stack,
+ * leaves and progress are the shared frame of bvh_build_common.h; this file holds the split
+ * rule only. */
 #include <math.h>
 #include <string.h>
 
-#include "bvh.h"
+#include "bvh_build_common.h"
 
 /* Wald 2007 measured 16-32 bins within a few percent of a full sweep's tree quality. */
 #define SAH_BINS 32
-/* Progress is reported about this many times per build: often enough for a bar, cheap. */
-#define SAH_PROGRESS_STEPS 64
 #define SAH_DEFAULT_MAX_LEAF 4
 
 typedef struct sah_ref {
@@ -54,11 +53,6 @@ typedef struct sah_bin {
     float bmax[3];
     float pad; /* 32 bytes, like sah_ref */
 } sah_bin;
-
-typedef struct sah_task {
-    uint32_t node, first, count, depth;
-    float cmin[3], cmax[3]; /* centroid bounds of the task's references */
-} sah_task;
 
 static float box_area(const float *bmin, const float *bmax)
 {
@@ -83,38 +77,11 @@ static inline int bin_index(float centroid, float cmin, float scale)
     return (int)f;
 }
 
-static void box_empty(float *bmin, float *bmax)
+/* Runs for every reference at every level, like bvh_build_box_grow(). */
+static inline void centroid_grow(bvh_build_bounds *b, const sah_ref *r)
 {
-    for (int a = 0; a < 3; a++) {
-        bmin[a] = FLT_MAX;
-        bmax[a] = -FLT_MAX;
-    }
-}
-
-/* The grow functions run for every reference at every level: written out per component with
- * conditional expressions so the compiler emits straight-line min/max instructions. */
-static inline float min_f(float a, float b) { return a < b ? a : b; }
-static inline float max_f(float a, float b) { return a > b ? a : b; }
-
-static inline void box_grow(float *bmin, float *bmax, const float *omin, const float *omax)
-{
-    bmin[0] = min_f(omin[0], bmin[0]);
-    bmin[1] = min_f(omin[1], bmin[1]);
-    bmin[2] = min_f(omin[2], bmin[2]);
-    bmax[0] = max_f(omax[0], bmax[0]);
-    bmax[1] = max_f(omax[1], bmax[1]);
-    bmax[2] = max_f(omax[2], bmax[2]);
-}
-
-static inline void centroid_grow(float *cmin, float *cmax, const sah_ref *r)
-{
-    float c0 = ref_centroid(r, 0), c1 = ref_centroid(r, 1), c2 = ref_centroid(r, 2);
-    cmin[0] = min_f(c0, cmin[0]);
-    cmin[1] = min_f(c1, cmin[1]);
-    cmin[2] = min_f(c2, cmin[2]);
-    cmax[0] = max_f(c0, cmax[0]);
-    cmax[1] = max_f(c1, cmax[1]);
-    cmax[2] = max_f(c2, cmax[2]);
+    const float c[3] = { ref_centroid(r, 0), ref_centroid(r, 1), ref_centroid(r, 2) };
+    bvh_build_box_grow(b->cmin, b->cmax, c, c);
 }
 
 typedef struct sah_split {
@@ -126,7 +93,7 @@ typedef struct sah_split {
 
 /* bins is scratch; empty holds empty bins, copied over it, which is cheaper than resetting
  * 96 bins field by field at each of the ~N/2 nodes. */
-static sah_split find_split(const sah_ref *refs, const sah_task *t, sah_bin bins[3][SAH_BINS],
+static sah_split find_split(const sah_ref *refs, const bvh_build_task *t, sah_bin bins[3][SAH_BINS],
                             const sah_bin *empty)
 {
     sah_split best = { .axis = -1, .cost = INFINITY, .balance = UINT32_MAX };
@@ -151,11 +118,11 @@ static sah_split find_split(const sah_ref *refs, const sah_task *t, sah_bin bins
         sah_bin *b1 = &bins[1][bin_index(ref_centroid(r, 1), cmin1, scale1)];
         sah_bin *b2 = &bins[2][bin_index(ref_centroid(r, 2), cmin2, scale2)];
         b0->count++;
-        box_grow(b0->bmin, b0->bmax, r->bmin, r->bmax);
+        bvh_build_box_grow(b0->bmin, b0->bmax, r->bmin, r->bmax);
         b1->count++;
-        box_grow(b1->bmin, b1->bmax, r->bmin, r->bmax);
+        bvh_build_box_grow(b1->bmin, b1->bmax, r->bmin, r->bmax);
         b2->count++;
-        box_grow(b2->bmin, b2->bmax, r->bmin, r->bmax);
+        bvh_build_box_grow(b2->bmin, b2->bmax, r->bmin, r->bmax);
     }
 
     for (int a = 0; a < 3; a++) {
@@ -172,19 +139,19 @@ static sah_split find_split(const sah_ref *refs, const sah_task *t, sah_bin bins
         uint32_t left_n[SAH_BINS];
         float bmin[3], bmax[3];
         uint32_t n = 0;
-        box_empty(bmin, bmax);
+        bvh_build_box_empty(bmin, bmax);
         for (int j = 0; j < k - 1; j++) {
             const sah_bin *bin = &bins[a][filled[j]];
-            box_grow(bmin, bmax, bin->bmin, bin->bmax);
+            bvh_build_box_grow(bmin, bmax, bin->bmin, bin->bmax);
             n += bin->count;
             left_n[j] = n;
             left_cost[j] = box_area(bmin, bmax) * (float)n;
         }
         n = 0;
-        box_empty(bmin, bmax);
+        bvh_build_box_empty(bmin, bmax);
         for (int j = k - 1; j >= 1; j--) {
             const sah_bin *bin = &bins[a][filled[j]];
-            box_grow(bmin, bmax, bin->bmin, bin->bmax);
+            bvh_build_box_grow(bmin, bmax, bin->bmin, bin->bmax);
             n += bin->count;
             uint32_t nl = left_n[j - 1];
             float cost = left_cost[j - 1] + box_area(bmin, bmax) * (float)n;
@@ -201,26 +168,26 @@ static sah_split find_split(const sah_ref *refs, const sah_task *t, sah_bin bins
 }
 
 /* Partitions [first, first + count) so bins below s->plane come first; returns the left count
- * and the centroid bounds of both sides. */
-static uint32_t partition_bins(sah_ref *refs, const sah_task *t, const sah_split *s,
-                               float *lcmin, float *lcmax, float *rcmin, float *rcmax)
+ * and sets the centroid bounds (only) of both sides. */
+static uint32_t partition_bins(sah_ref *refs, const bvh_build_task *t, const sah_split *s,
+                               bvh_build_bounds *left, bvh_build_bounds *right)
 {
     int a = s->axis;
     float cmin = t->cmin[a], scale = s->scale[a];
-    box_empty(lcmin, lcmax);
-    box_empty(rcmin, rcmax);
+    bvh_build_box_empty(left->cmin, left->cmax);
+    bvh_build_box_empty(right->cmin, right->cmax);
     /* Each reference is classified once: the one swapped in from the end is examined next. */
     uint32_t i = t->first, j = t->first + t->count;
     while (i < j) {
         if (bin_index(ref_centroid(&refs[i], a), cmin, scale) < s->plane) {
-            centroid_grow(lcmin, lcmax, &refs[i]);
+            centroid_grow(left, &refs[i]);
             i++;
         } else {
             j--;
             sah_ref tmp = refs[i];
             refs[i] = refs[j];
             refs[j] = tmp;
-            centroid_grow(rcmin, rcmax, &refs[j]);
+            centroid_grow(right, &refs[j]);
         }
     }
     return i - t->first;
@@ -256,88 +223,51 @@ static void select_nth(sah_ref *refs, uint32_t lo, uint32_t hi, uint32_t k, int 
     }
 }
 
-static void bounds_of(const sah_ref *refs, uint32_t first, uint32_t count, float *bmin, float *bmax,
-                      float *cmin, float *cmax)
+static void bounds_grow(bvh_build_bounds *b, const sah_ref *r)
 {
-    box_empty(bmin, bmax);
-    box_empty(cmin, cmax);
-    for (uint32_t i = first; i < first + count; i++) {
-        box_grow(bmin, bmax, refs[i].bmin, refs[i].bmax);
-        centroid_grow(cmin, cmax, &refs[i]);
-    }
+    bvh_build_box_grow(b->bmin, b->bmax, r->bmin, r->bmax);
+    centroid_grow(b, r);
 }
 
-static void set_box(vkrt_gpu_node *n, const float *bmin, const float *bmax)
+static void bounds_of(const sah_ref *refs, uint32_t first, uint32_t count, bvh_build_bounds *b)
 {
-    n->bmin = (vkrt_float3){ bmin[0], bmin[1], bmin[2] };
-    n->bmax = (vkrt_float3){ bmax[0], bmax[1], bmax[2] };
+    bvh_build_bounds_empty(b);
+    for (uint32_t i = first; i < first + count; i++) bounds_grow(b, &refs[i]);
 }
 
 vkrt_result bvh_build_sah(core *c, const mesh *m, const bvh_build_desc *desc, bvh *out)
 {
-    memset(out, 0, sizeof *out);
-    uint32_t n = m->tri_count;
-    if (n == 0) return core_fail(c, VKRT_ERROR_EMPTY_SCENE, "the mesh has no triangles to build a BVH over");
-    if (n > UINT32_MAX / 2)
-        return core_fail(c, VKRT_ERROR_LIMIT, "%u triangles: a BVH holds at most %u", n, UINT32_MAX / 2);
+    bvh_build_state b;
+    vkrt_result r = bvh_build_begin(&b, c, m, desc, sizeof(sah_ref), offsetof(sah_ref, tri), out);
+    if (r != VKRT_OK) return r;
     uint32_t max_leaf = desc && desc->max_leaf_size ? desc->max_leaf_size : SAH_DEFAULT_MAX_LEAF;
-    vkrt_progress_fn progress = desc ? desc->progress : NULL;
-    void *progress_user = desc ? desc->progress_user : NULL;
+    sah_ref *refs = b.refs;
 
-    vkrt_result r = VKRT_ERROR_OUT_OF_MEMORY;
-    uint32_t node_cap = 2 * n - 1;
-    sah_ref *refs = core_alloc_array(c, n, sizeof *refs);
-    vkrt_gpu_node *nodes = core_alloc_array(c, node_cap, sizeof *nodes);
-    uint32_t *order = core_alloc_array(c, n, sizeof *order);
-    if (!refs || !nodes || !order) {
-        r = core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "out of memory building the BVH of %u triangles", n);
-        goto fail;
-    }
-
-    float root_min[3], root_max[3];
-    sah_task task = { .node = 0, .first = 0, .count = n, .depth = 0 };
-    box_empty(root_min, root_max);
-    box_empty(task.cmin, task.cmax);
-    for (uint32_t i = 0; i < n; i++) {
-        const float *p = m->positions + (size_t)i * 9;
+    bvh_build_bounds root;
+    bvh_build_bounds_empty(&root);
+    for (uint32_t i = 0; i < b.tri_count; i++) {
         sah_ref *ref = &refs[i];
-        for (int a = 0; a < 3; a++) {
-            float lo = p[a], hi = p[a];
-            if (p[3 + a] < lo) lo = p[3 + a];
-            if (p[3 + a] > hi) hi = p[3 + a];
-            if (p[6 + a] < lo) lo = p[6 + a];
-            if (p[6 + a] > hi) hi = p[6 + a];
-            ref->bmin[a] = lo;
-            ref->bmax[a] = hi;
-        }
+        bvh_build_tri_box(m->positions + (size_t)i * 9, ref->bmin, ref->bmax);
         ref->tri = i;
         ref->pad = 0.0f;
-        box_grow(root_min, root_max, ref->bmin, ref->bmax);
-        centroid_grow(task.cmin, task.cmax, ref);
+        bounds_grow(&root, ref);
     }
-    set_box(&nodes[0], root_min, root_max);
-    uint32_t node_count = 1;
 
-    uint64_t placed = 0, report_at = 0, report_step = n / SAH_PROGRESS_STEPS ? n / SAH_PROGRESS_STEPS : 1;
-    uint32_t depth = 0;
-    /* Each split pushes one child and descends into the other, one level deeper, so the
-     * stack never holds more entries than the depth cap. */
-    sah_task stack[VKRT_MAX_BVH_DEPTH + 2];
-    uint32_t sp = 0;
     sah_bin bins[3][SAH_BINS], empty[3][SAH_BINS];
-    for (int b = 0; b < 3 * SAH_BINS; b++) {
-        sah_bin *bin = &empty[b / SAH_BINS][b % SAH_BINS];
-        box_empty(bin->bmin, bin->bmax);
+    for (int k = 0; k < 3 * SAH_BINS; k++) {
+        sah_bin *bin = &empty[k / SAH_BINS][k % SAH_BINS];
+        bvh_build_box_empty(bin->bmin, bin->bmax);
         bin->count = 0;
         bin->pad = 0.0f;
     }
-    if (progress && !progress(progress_user, "bvh", 0.0f)) goto cancelled;
 
-    for (;;) {
-        vkrt_gpu_node *node = &nodes[task.node];
+    bvh_build_task task;
+    bool more = bvh_build_start(&b, &root, &task);
+    while (more) {
+        const vkrt_gpu_node *node = &b.nodes[task.node];
         bool leaf = task.count == 1 || task.depth >= VKRT_MAX_BVH_DEPTH;
         uint32_t left_count = 0;
-        float lmin[3], lmax[3], rmin[3], rmax[3], lcmin[3], lcmax[3], rcmin[3], rcmax[3];
+        bvh_build_bounds left, right;
         if (!leaf) {
             sah_split s = find_split(refs, &task, bins, &empty[0][0]);
             float nmin[3] = { node->bmin.x, node->bmin.y, node->bmin.z };
@@ -347,14 +277,14 @@ vkrt_result bvh_build_sah(core *c, const mesh *m, const bvh_build_desc *desc, bv
                 if (task.count <= max_leaf && area * (float)task.count <= area + s.cost) {
                     leaf = true;
                 } else {
-                    left_count = partition_bins(refs, &task, &s, lcmin, lcmax, rcmin, rcmax);
-                    box_empty(lmin, lmax);
-                    box_empty(rmin, rmax);
-                    for (int b = 0; b < SAH_BINS; b++) {
-                        const sah_bin *bin = &bins[s.axis][b];
+                    left_count = partition_bins(refs, &task, &s, &left, &right);
+                    bvh_build_box_empty(left.bmin, left.bmax);
+                    bvh_build_box_empty(right.bmin, right.bmax);
+                    for (int k = 0; k < SAH_BINS; k++) {
+                        const sah_bin *bin = &bins[s.axis][k];
                         if (bin->count == 0) continue;
-                        if (b < s.plane) box_grow(lmin, lmax, bin->bmin, bin->bmax);
-                        else box_grow(rmin, rmax, bin->bmin, bin->bmax);
+                        if (k < s.plane) bvh_build_box_grow(left.bmin, left.bmax, bin->bmin, bin->bmax);
+                        else bvh_build_box_grow(right.bmin, right.bmax, bin->bmin, bin->bmax);
                     }
                 }
             } else if (task.count > max_leaf) {
@@ -372,8 +302,8 @@ vkrt_result bvh_build_sah(core *c, const mesh *m, const bvh_build_desc *desc, bv
                 } else {
                     left_count = task.count / 2;
                     select_nth(refs, task.first, task.first + task.count - 1, task.first + left_count, axis);
-                    bounds_of(refs, task.first, left_count, lmin, lmax, lcmin, lcmax);
-                    bounds_of(refs, task.first + left_count, task.count - left_count, rmin, rmax, rcmin, rcmax);
+                    bounds_of(refs, task.first, left_count, &left);
+                    bounds_of(refs, task.first + left_count, task.count - left_count, &right);
                 }
             } else {
                 leaf = true;
@@ -382,63 +312,8 @@ vkrt_result bvh_build_sah(core *c, const mesh *m, const bvh_build_desc *desc, bv
              * future change from looping forever on an empty child. */
             if (!leaf && (left_count == 0 || left_count == task.count)) leaf = true;
         }
-
-        if (leaf) {
-            node->left_first = task.first;
-            node->tri_count = task.count;
-            if (task.depth > depth) depth = task.depth;
-            placed += task.count;
-            if (progress && (placed >= report_at || placed == n)) {
-                if (!progress(progress_user, "bvh", (float)((double)placed / (double)n))) goto cancelled;
-                report_at = placed + report_step;
-            }
-            if (sp == 0) break;
-            task = stack[--sp];
-            continue;
-        }
-
-        uint32_t left = node_count;
-        node_count += 2;
-        node->left_first = left;
-        node->tri_count = 0;
-        set_box(&nodes[left], lmin, lmax);
-        set_box(&nodes[left + 1], rmin, rmax);
-        sah_task right = { .node = left + 1, .first = task.first + left_count,
-                           .count = task.count - left_count, .depth = task.depth + 1 };
-        memcpy(right.cmin, rcmin, sizeof right.cmin);
-        memcpy(right.cmax, rcmax, sizeof right.cmax);
-        stack[sp++] = right;
-        task.node = left;
-        task.count = left_count;
-        task.depth++;
-        memcpy(task.cmin, lcmin, sizeof task.cmin);
-        memcpy(task.cmax, lcmax, sizeof task.cmax);
+        if (leaf) more = bvh_build_leaf(&b, &task);
+        else bvh_build_split(&b, &task, left_count, &left, &right);
     }
-
-    for (uint32_t i = 0; i < n; i++) order[i] = refs[i].tri;
-    core_free(c, refs);
-    /* The array was sized for the worst case (one triangle per leaf); give back the rest. A
-     * failed shrink only wastes memory, so it is not an error. */
-    if (node_count < node_cap) {
-        vkrt_gpu_node *exact = core_alloc_array(c, node_count, sizeof *exact);
-        if (exact) {
-            memcpy(exact, nodes, (size_t)node_count * sizeof *exact);
-            core_free(c, nodes);
-            nodes = exact;
-        }
-    }
-    out->nodes = nodes;
-    out->node_count = node_count;
-    out->tri_order = order;
-    out->tri_count = n;
-    out->depth = depth;
-    return VKRT_OK;
-
-cancelled:
-    r = core_fail(c, VKRT_ERROR_CANCELLED, "BVH build cancelled by the progress callback");
-fail:
-    core_free(c, refs);
-    core_free(c, nodes);
-    core_free(c, order);
-    return r;
+    return bvh_build_finish(&b, out);
 }

@@ -282,6 +282,13 @@ void mesh_normalize(mesh *m)
     mesh_update_bounds(m);
 }
 
+vkrt_result mesh_finish(core *c, mesh *m, vkrt_result r)
+{
+    if (r == VKRT_OK) mesh_update_bounds(m);
+    else mesh_destroy(c, m);
+    return r;
+}
+
 void mesh_destroy(core *c, mesh *m)
 {
     if (!m) return;

@@ -48,6 +48,11 @@ vkrt_result mesh_load_gltf(core *c, const char *path, mesh *m);
 /* The built-in scene: a subdivided icosphere, a torus and a box on a ground plane. */
 vkrt_result mesh_make_builtin(core *c, mesh *m);
 
+/* The last step of every mesh producer (loaders, built-in scene), so all leave a mesh the same
+ * way: with r == VKRT_OK the bounds are computed; otherwise the partly filled mesh is emptied,
+ * so no caller ever sees part of a file. Returns r. */
+vkrt_result mesh_finish(core *c, mesh *m, vkrt_result r);
+
 /* Recomputes bounds_min/max from the corners. */
 void mesh_update_bounds(mesh *m);
 /* Moves the bounding-box centre to the origin and scales the largest extent to 1, so the

@@ -266,13 +266,10 @@ vkrt_result mesh_make_builtin(core *c, mesh *m)
     const mat4 box = mat_mul(tilt, mat_mul(mat_translate(1.5f, box_half, 0.2f),
                                            mat_mul(mat_rotate_y(30.0), mat_scale(box_half))));
     vkrt_result r;
-    if ((r = add_ground(c, m, tilt)) != VKRT_OK) goto fail;
-    if ((r = add_sphere(c, m, sphere)) != VKRT_OK) goto fail;
-    if ((r = add_torus(c, m, torus)) != VKRT_OK) goto fail;
-    if ((r = add_box(c, m, box)) != VKRT_OK) goto fail;
-    mesh_update_bounds(m);
-    return VKRT_OK;
-fail:
-    mesh_destroy(c, m);
-    return r;
+    if ((r = add_ground(c, m, tilt)) != VKRT_OK) goto done;
+    if ((r = add_sphere(c, m, sphere)) != VKRT_OK) goto done;
+    if ((r = add_torus(c, m, torus)) != VKRT_OK) goto done;
+    r = add_box(c, m, box);
+done:
+    return mesh_finish(c, m, r);
 }

@@ -616,29 +616,29 @@ vkrt_result mesh_load_gltf(core *c, const char *path, mesh *m)
     vkrt_result r;
     if (cr == cgltf_result_invalid_gltf) {
         data = NULL;
-        if ((r = parse_with_shared_children(c, path, &options, &data, &file, &h)) != VKRT_OK) goto fail;
+        if ((r = parse_with_shared_children(c, path, &options, &data, &file, &h)) != VKRT_OK) goto done;
         if (!data) {
             r = parse_failure(c, path, cr, 0);
-            goto fail;
+            goto done;
         }
     } else if (cr != cgltf_result_success) {
         r = parse_failure(c, path, cr, parse_errno);
-        goto fail;
+        goto done;
     } else if ((r = hierarchy_from_cgltf(c, path, data, &h)) != VKRT_OK) {
-        goto fail;
+        goto done;
     }
     /* Before the buffers: a Draco-only file may have none vkrt could load anyway. */
-    if ((r = check_required_extensions(c, path, data)) != VKRT_OK) goto fail;
+    if ((r = check_required_extensions(c, path, data)) != VKRT_OK) goto done;
     if ((cr = cgltf_load_buffers(&options, data, path)) != cgltf_result_success) {
         r = buffers_failure(c, path, data, cr);
-        goto fail;
+        goto done;
     }
     if ((cr = cgltf_validate(data)) != cgltf_result_success) {
-        if ((r = find_bad_index(c, path, data)) != VKRT_OK) goto fail;
+        if ((r = find_bad_index(c, path, data)) != VKRT_OK) goto done;
         r = cr == cgltf_result_data_too_short
                 ? core_fail(c, VKRT_ERROR_PARSE, "%s: an accessor or buffer view reaches past the end of its data", path)
                 : parse_failure(c, path, cr, 0);
-        goto fail;
+        goto done;
     }
 
     const cgltf_scene *scene = data->scene ? data->scene : data->scenes_count ? &data->scenes[0] : NULL;
@@ -646,7 +646,7 @@ vkrt_result mesh_load_gltf(core *c, const char *path, mesh *m)
     roots = core_alloc_array(c, scene ? scene->nodes_count : data->nodes_count, sizeof *roots);
     if (!roots) {
         r = core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "%s: out of memory", path);
-        goto fail;
+        goto done;
     }
     if (scene) {
         for (cgltf_size i = 0; i < scene->nodes_count; i++) roots[root_count++] = (size_t)(scene->nodes[i] - data->nodes);
@@ -658,21 +658,18 @@ vkrt_result mesh_load_gltf(core *c, const char *path, mesh *m)
             if (roots[i]) roots[root_count++] = i;
     }
     gltf_walk w = { .c = c, .path = path, .data = data, .m = m };
-    if ((r = walk_nodes(&w, &h, roots, root_count)) != VKRT_OK) goto fail;
+    if ((r = walk_nodes(&w, &h, roots, root_count)) != VKRT_OK) goto done;
     if (m->tri_count == 0) {
         if (w.skipped_primitives && !w.triangle_primitives)
             r = core_fail(c, VKRT_ERROR_EMPTY_SCENE, "%s: has only points or lines (%zu primitives), no triangles", path,
                           w.skipped_primitives);
         else
             r = core_fail(c, VKRT_ERROR_EMPTY_SCENE, "%s: the scene has no triangles", path);
-        goto fail;
+        goto done;
     }
-    mesh_update_bounds(m);
     r = VKRT_OK;
-    goto done;
-fail:
-    mesh_destroy(c, m);
 done:
+    mesh_finish(c, m, r);
     core_free(c, roots);
     hierarchy_free(c, &h);
     cgltf_free(data);

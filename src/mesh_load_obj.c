@@ -156,45 +156,38 @@ static void fail_in_callback(obj_state *s, vkrt_result r)
     if (s->error == VKRT_OK) s->error = r;
 }
 
+/* One `v` or `vn` record (keyword), appended to its array of triples. Checked after the append
+ * so the message can number the record: a finite decimal too large for a float reads as
+ * infinity. noun and plural name the record in messages ("vertex", "vertices"). */
+static void push_triple(obj_state *s, float **items, size_t *count, size_t *capacity, const float xyz[3],
+                        const char *keyword, const char *noun, const char *plural)
+{
+    if (s->error) return;
+    if (core_grow(s->c, (void **)items, capacity, *count + 1, 3 * sizeof(float))) {
+        fail_in_callback(s, core_fail(s->c, VKRT_ERROR_OUT_OF_MEMORY, "%s: out of memory reading %s", s->path, plural));
+        return;
+    }
+    memcpy(*items + 3 * (*count)++, xyz, 3 * sizeof(float));
+    if (!isfinite(xyz[0]) || !isfinite(xyz[1]) || !isfinite(xyz[2])) {
+        size_t line = statement_line(s->text, s->size, keyword, *count);
+        fail_in_callback(s, core_fail(s->c, VKRT_ERROR_INVALID_GEOMETRY,
+                                      "%s: line %zu: %s %zu has a non-finite coordinate (overflows a float)",
+                                      s->path, line, noun, *count));
+    }
+}
+
 static void on_vertex(void *user, float x, float y, float z)
 {
     obj_state *s = user;
-    if (s->error) return;
-    if (core_grow(s->c, (void **)&s->positions, &s->position_capacity, s->position_count + 1, 3 * sizeof(float))) {
-        fail_in_callback(s, core_fail(s->c, VKRT_ERROR_OUT_OF_MEMORY, "%s: out of memory reading vertices", s->path));
-        return;
-    }
-    float *v = s->positions + 3 * s->position_count++;
-    v[0] = x;
-    v[1] = y;
-    v[2] = z;
-    if (!isfinite(x) || !isfinite(y) || !isfinite(z)) {
-        /* A finite decimal too large for a float. */
-        size_t line = statement_line(s->text, s->size, "v", s->position_count);
-        fail_in_callback(s, core_fail(s->c, VKRT_ERROR_INVALID_GEOMETRY,
-                                      "%s: line %zu: vertex %zu has a non-finite coordinate (overflows a float)",
-                                      s->path, line, s->position_count));
-    }
+    push_triple(s, &s->positions, &s->position_count, &s->position_capacity, (const float[3]){ x, y, z }, "v",
+                "vertex", "vertices");
 }
 
 static void on_normal(void *user, float x, float y, float z)
 {
     obj_state *s = user;
-    if (s->error) return;
-    if (core_grow(s->c, (void **)&s->normals, &s->normal_capacity, s->normal_count + 1, 3 * sizeof(float))) {
-        fail_in_callback(s, core_fail(s->c, VKRT_ERROR_OUT_OF_MEMORY, "%s: out of memory reading normals", s->path));
-        return;
-    }
-    float *n = s->normals + 3 * s->normal_count++;
-    n[0] = x;
-    n[1] = y;
-    n[2] = z;
-    if (!isfinite(x) || !isfinite(y) || !isfinite(z)) {
-        size_t line = statement_line(s->text, s->size, "vn", s->normal_count);
-        fail_in_callback(s, core_fail(s->c, VKRT_ERROR_INVALID_GEOMETRY,
-                                      "%s: line %zu: normal %zu has a non-finite coordinate (overflows a float)",
-                                      s->path, line, s->normal_count));
-    }
+    push_triple(s, &s->normals, &s->normal_count, &s->normal_capacity, (const float[3]){ x, y, z }, "vn", "normal",
+                "normals");
 }
 
 /* 1-based or negative (relative) OBJ index to 0-based; false for 0, which OBJ does not allow
@@ -390,19 +383,19 @@ vkrt_result mesh_load_obj(core *c, const char *path, mesh *m)
     char *text = NULL;
     size_t size = 0;
     vkrt_result r = read_file(c, path, &text, &size);
-    if (r != VKRT_OK) goto fail;
+    if (r != VKRT_OK) goto done;
     s.text = text;
     s.size = size;
     obj_scan scan;
-    if ((r = scan_text(c, path, text, size, &scan)) != VKRT_OK) goto fail;
+    if ((r = scan_text(c, path, text, size, &scan)) != VKRT_OK) goto done;
     if (scan.statements == 0 && scan.unknown > 0) {
         r = core_fail(c, VKRT_ERROR_PARSE, "%s: not an OBJ file: none of its %zu lines is an OBJ statement", path,
                       scan.unknown);
-        goto fail;
+        goto done;
     }
     if (scan.vertices > (size_t)INT32_MAX) {
         r = core_fail(c, VKRT_ERROR_LIMIT, "%s: more than %d vertices", path, INT32_MAX);
-        goto fail;
+        goto done;
     }
 
     on_group(&s); /* faces before any `o` or `g` form the first object */
@@ -414,17 +407,17 @@ vkrt_result mesh_load_obj(core *c, const char *path, mesh *m)
         message, sizeof message);
     if (s.error) {
         r = s.error;
-        goto fail;
+        goto done;
     }
     if (status == TINYOBJ_SHIM_OUT_OF_MEMORY) {
         r = core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "%s: out of memory in tinyobjloader", path);
-        goto fail;
+        goto done;
     }
     if (status != TINYOBJ_SHIM_OK) {
         r = core_fail(c, VKRT_ERROR_PARSE, "%s: tinyobjloader: %s", path, message);
-        goto fail;
+        goto done;
     }
-    if ((r = check_indices(&s)) != VKRT_OK) goto fail;
+    if ((r = check_indices(&s)) != VKRT_OK) goto done;
 
     if (s.tri_count == 0) {
         if (scan.lines || scan.points)
@@ -434,11 +427,11 @@ vkrt_result mesh_load_obj(core *c, const char *path, mesh *m)
             r = core_fail(c, VKRT_ERROR_EMPTY_SCENE, "%s: has no face with 3 or more corners", path);
         else
             r = core_fail(c, VKRT_ERROR_EMPTY_SCENE, "%s: has no faces", path);
-        goto fail;
+        goto done;
     }
     if (s.tri_count > UINT32_MAX) {
         r = core_fail(c, VKRT_ERROR_LIMIT, "%s: more than %u triangles", path, UINT32_MAX);
-        goto fail;
+        goto done;
     }
 
     core_free(c, text); /* the triangles no longer need it, and the mesh may be large */
@@ -448,21 +441,18 @@ vkrt_result mesh_load_obj(core *c, const char *path, mesh *m)
     remap = core_alloc_array(c, s.position_count, sizeof *remap);
     if (!remap) {
         r = core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "%s: out of memory", path);
-        goto fail;
+        goto done;
     }
     memset(remap, 0xff, s.position_count * sizeof *remap);
     for (size_t o = 0; o < s.object_count; o++) {
         size_t first = s.object_starts[o];
         size_t last = o + 1 < s.object_count ? s.object_starts[o + 1] : s.tri_count;
         if (first == last) continue;
-        if ((r = append_object(&s, m, first, last, remap, o)) != VKRT_OK) goto fail;
+        if ((r = append_object(&s, m, first, last, remap, o)) != VKRT_OK) goto done;
     }
-    mesh_update_bounds(m);
     r = VKRT_OK;
-    goto done;
-fail:
-    mesh_destroy(c, m);
 done:
+    mesh_finish(c, m, r);
     core_free(c, remap);
     core_free(c, text);
     core_free(c, s.positions);

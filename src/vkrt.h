@@ -148,9 +148,26 @@ typedef enum vkrt_bvh_builder {
     VKRT_BVH_BUILDER_BINNED_SAH   /* surface area heuristic over 32 bins per axis */
 } vkrt_bvh_builder;
 
+/* One mesh held in memory by the caller (all arrays borrowed for the vkrt_scene_create call). */
+typedef struct vkrt_mesh_desc {
+    const float *positions;       /* 3 floats per vertex; must be finite */
+    uint32_t vertex_count;
+    const uint32_t *indices;      /* 3 per triangle, each < vertex_count; NULL: non-indexed, the
+                                     vertices taken three at a time */
+    uint32_t index_count;         /* a multiple of 3 (ignored when indices is NULL) */
+    const float *normals;         /* 3 floats per vertex; NULL (default): computed,
+                                     angle-weighted */
+    const float *transform;       /* column-major 4x4 placing the mesh in the scene; NULL
+                                     (default): identity */
+} vkrt_mesh_desc;
+
 typedef struct vkrt_scene_desc {
     const char *path;             /* .obj, .gltf or .glb (borrowed for the call); NULL
-                                     (default): the built-in procedural scene */
+                                     (default): `meshes` when mesh_count > 0, else the built-in
+                                     procedural scene */
+    const vkrt_mesh_desc *meshes; /* in-memory meshes, used when path is NULL; triangle ids
+                                     count through them in order (borrowed for the call) */
+    uint32_t mesh_count;
     bool keep_world_coordinates;  /* false (default): centre the bounding box on the origin and
                                      scale its largest extent to 1 */
     vkrt_bvh_builder builder;     /* default: binned SAH */
@@ -207,6 +224,20 @@ typedef enum vkrt_heat {
     VKRT_HEAT_TRIS         /* triangles tested */
 } vkrt_heat;
 
+typedef enum vkrt_intersector {
+    VKRT_INTERSECTOR_DEFAULT = 0,    /* watertight */
+    VKRT_INTERSECTOR_WATERTIGHT,     /* Woop, Benthin and Wald 2013: no ray slips between two
+                                        triangles that share an edge or a vertex */
+    VKRT_INTERSECTOR_MOLLER_TRUMBORE /* the seed's; kept so the difference can be measured */
+} vkrt_intersector;
+
+typedef enum vkrt_precision {
+    VKRT_PRECISION_DEFAULT = 0, /* float */
+    VKRT_PRECISION_FLOAT,
+    VKRT_PRECISION_DOUBLE       /* CPU backend only: rays, boxes and triangle tests in double,
+                                   from the same scene: the reference for every error figure */
+} vkrt_precision;
+
 typedef struct vkrt_camera {
     float eye[3];          /* eye == target (e.g. all zero, the default): eye (0, 0, 1.5) and
                               target (0, 0, 0), framing the normalised scene */
@@ -222,6 +253,8 @@ typedef struct vkrt_render_desc {
     vkrt_mode mode;           /* default: normal */
     vkrt_traversal traversal; /* default: BVH */
     vkrt_heat heat;           /* heatmap mode only; default: nodes */
+    vkrt_intersector intersector; /* default: watertight */
+    vkrt_precision precision; /* default: float; double needs the CPU backend */
     vkrt_progress_fn progress;/* NULL (default): none; called between tiles */
     void *progress_user;
 } vkrt_render_desc;
@@ -242,6 +275,40 @@ size_t vkrt_render_floats(uint32_t width, uint32_t height);
  * call). stats may be NULL. */
 vkrt_result vkrt_render(vkrt_context *ctx, vkrt_scene *scene, const vkrt_render_desc *desc,
                         float *out_rgba, size_t out_floats, vkrt_render_stats *out_stats);
+
+/* ---- arbitrary rays ------------------------------------------------------------------ */
+
+/* A ray, 32 bytes (the layout of vkrt_gpu_ray in shaders/vkrt_shared.h). Hits are accepted
+ * for tmin < t < tmax; tmax = 0 (the zero default) means +infinity. dir need not be unit:
+ * t is in units of |dir|. */
+typedef struct vkrt_ray {
+    float origin[3];
+    float tmin;
+    float dir[3];
+    float tmax;
+} vkrt_ray;
+
+/* The closest hit of one ray. A miss has t = -1 and prim_id = VKRT_NO_HIT. */
+#define VKRT_NO_HIT UINT32_MAX
+typedef struct vkrt_hit {
+    float t;
+    uint32_t prim_id;         /* triangle index in the loaded scene */
+    float u, v;               /* barycentrics of v1 and v2 */
+} vkrt_hit;
+
+typedef struct vkrt_trace_desc {
+    vkrt_traversal traversal;     /* default: BVH */
+    vkrt_intersector intersector; /* default: watertight */
+    vkrt_precision precision;     /* default: float; double needs the CPU backend */
+    vkrt_progress_fn progress;    /* NULL (default): none */
+    void *progress_user;
+} vkrt_trace_desc;
+
+/* Traces `count` rays (borrowed for the call) and writes their closest hits to out_hits
+ * (count entries). Closest-hit ties break towards the lower prim_id, so every traversal and
+ * backend agrees. Rays with a non-finite origin or direction, or a zero direction, miss. */
+vkrt_result vkrt_trace_rays(vkrt_context *ctx, vkrt_scene *scene, const vkrt_trace_desc *desc,
+                            const vkrt_ray *rays, size_t count, vkrt_hit *out_hits);
 
 /* ---- images ------------------------------------------------------------------------- */
 

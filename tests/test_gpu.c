@@ -235,22 +235,28 @@ static void gpu_shared_layouts_match_c(void)
     vkrt_gpu_node nodes[2];
     vkrt_gpu_tri tris[2];
     vkrt_gpu_hit hits[2];
+    vkrt_gpu_ray rays[2];
     vkrt_gpu_push push;
     fill_distinct(nodes, sizeof nodes, 100.0f);
     fill_distinct(tris, sizeof tris, 200.0f);
     fill_distinct(hits, sizeof hits, 300.0f);
+    fill_distinct(rays, sizeof rays, 350.0f);
     fill_distinct(&push, sizeof push, 400.0f);
-    const size_t words = (sizeof nodes[1] + sizeof tris[1] + sizeof hits[1] + sizeof push) / 4;
+    /* The order in which layout_check.comp writes the structs out. */
+    const void *parts[] = { &nodes[1], &tris[1], &hits[1], &rays[1], &push };
+    const size_t part_sizes[] = { sizeof nodes[1], sizeof tris[1], sizeof hits[1], sizeof rays[1], sizeof push };
     uint32_t expected[64];
+    size_t words = 0;
+    for (int i = 0; i < 5; i++) {
+        memcpy(expected + words, parts[i], part_sizes[i]);
+        words += part_sizes[i] / 4;
+    }
     CHECK(words <= 64);
-    memcpy(expected, &nodes[1], sizeof nodes[1]);
-    memcpy((char *)expected + sizeof nodes[1], &tris[1], sizeof tris[1]);
-    memcpy((char *)expected + sizeof nodes[1] + sizeof tris[1], &hits[1], sizeof hits[1]);
-    memcpy((char *)expected + sizeof nodes[1] + sizeof tris[1] + sizeof hits[1], &push, sizeof push);
 
-    vk_buffer in[3] = { 0 }, out = { 0 };
-    const void *data[3] = { nodes, tris, hits };
-    const size_t sizes[3] = { sizeof nodes, sizeof tris, sizeof hits };
+    /* Bindings 0-2 and 4 are inputs; binding 3 receives the words. */
+    vk_buffer in[4] = { 0 }, out = { 0 };
+    const void *data[4] = { nodes, tris, hits, rays };
+    const size_t sizes[4] = { sizeof nodes, sizeof tris, sizeof hits, sizeof rays };
     VkDescriptorSetLayout set_layout = VK_NULL_HANDLE;
     VkPipelineLayout layout = VK_NULL_HANDLE;
     VkShaderModule module = VK_NULL_HANDLE;
@@ -259,7 +265,7 @@ static void gpu_shared_layouts_match_c(void)
     uint32_t *spirv = NULL;
     size_t spirv_words = 0;
     bool ok = true;
-    for (int i = 0; i < 3 && ok; i++) {
+    for (int i = 0; i < 4 && ok; i++) {
         ok = vk_buffer_create(vk, sizes[i], VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT,
                               VK_MEMORY_DEVICE, "layout input", &in[i]) == VKRT_OK &&
              vk_buffer_upload(vk, &in[i], data[i], sizes[i]) == VKRT_OK;
@@ -269,13 +275,13 @@ static void gpu_shared_layouts_match_c(void)
     ok = ok && vk_compile_glsl(vk->core, "layout_check.comp", vkrt_shader_layout_check_comp, &spirv, &spirv_words) == VKRT_OK;
     CHECK_MSG(ok, "setup: %s", vkrt_context_last_error(gpu));
     if (ok) {
-        VkDescriptorSetLayoutBinding b[4];
-        for (uint32_t i = 0; i < 4; i++)
+        VkDescriptorSetLayoutBinding b[5];
+        for (uint32_t i = 0; i < 5; i++)
             b[i] = (VkDescriptorSetLayoutBinding){ i, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, VK_SHADER_STAGE_COMPUTE_BIT, NULL };
-        VkDescriptorSetLayoutCreateInfo sl = { .sType = VK_STRUCTURE_TYPE_DESCRIPTOR_SET_LAYOUT_CREATE_INFO, .bindingCount = 4, .pBindings = b };
+        VkDescriptorSetLayoutCreateInfo sl = { .sType = VK_STRUCTURE_TYPE_DESCRIPTOR_SET_LAYOUT_CREATE_INFO, .bindingCount = 5, .pBindings = b };
         VkPushConstantRange range = { VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof push };
         VkShaderModuleCreateInfo mi = { .sType = VK_STRUCTURE_TYPE_SHADER_MODULE_CREATE_INFO, .codeSize = spirv_words * 4, .pCode = spirv };
-        VkDescriptorPoolSize ps = { VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 4 };
+        VkDescriptorPoolSize ps = { VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 5 };
         VkDescriptorPoolCreateInfo pi = { .sType = VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO, .maxSets = 1, .poolSizeCount = 1, .pPoolSizes = &ps };
         ok = vkCreateDescriptorSetLayout(vk->device, &sl, NULL, &set_layout) == VK_SUCCESS;
         VkPipelineLayoutCreateInfo pl = { .sType = VK_STRUCTURE_TYPE_PIPELINE_LAYOUT_CREATE_INFO, .setLayoutCount = 1,
@@ -296,14 +302,15 @@ static void gpu_shared_layouts_match_c(void)
         ok = ok && vkAllocateDescriptorSets(vk->device, &ai, &set) == VK_SUCCESS;
         CHECK(ok);
         if (ok) {
-            VkDescriptorBufferInfo bi[4] = { { in[0].buffer, 0, VK_WHOLE_SIZE }, { in[1].buffer, 0, VK_WHOLE_SIZE },
-                                             { in[2].buffer, 0, VK_WHOLE_SIZE }, { out.buffer, 0, VK_WHOLE_SIZE } };
-            VkWriteDescriptorSet w[4];
-            for (uint32_t i = 0; i < 4; i++)
+            VkDescriptorBufferInfo bi[5] = { { in[0].buffer, 0, VK_WHOLE_SIZE }, { in[1].buffer, 0, VK_WHOLE_SIZE },
+                                             { in[2].buffer, 0, VK_WHOLE_SIZE }, { out.buffer, 0, VK_WHOLE_SIZE },
+                                             { in[3].buffer, 0, VK_WHOLE_SIZE } };
+            VkWriteDescriptorSet w[5];
+            for (uint32_t i = 0; i < 5; i++)
                 w[i] = (VkWriteDescriptorSet){ .sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET, .dstSet = set, .dstBinding = i,
                                                .descriptorCount = 1, .descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER,
                                                .pBufferInfo = &bi[i] };
-            vkUpdateDescriptorSets(vk->device, 4, w, 0, NULL);
+            vkUpdateDescriptorSets(vk->device, 5, w, 0, NULL);
             VkCommandBuffer cmd;
             CHECK(vk_commands_begin(vk, &cmd) == VKRT_OK);
             vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline);
@@ -328,7 +335,7 @@ static void gpu_shared_layouts_match_c(void)
     if (layout) vkDestroyPipelineLayout(vk->device, layout, NULL);
     if (set_layout) vkDestroyDescriptorSetLayout(vk->device, set_layout, NULL);
     core_free(vk->core, spirv);
-    for (int i = 0; i < 3; i++) vk_buffer_destroy(vk, &in[i]);
+    for (int i = 0; i < 4; i++) vk_buffer_destroy(vk, &in[i]);
     vk_buffer_destroy(vk, &out);
 }
 
