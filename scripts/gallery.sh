@@ -1,0 +1,20 @@
+#!/usr/bin/env bash
+# Regenerates the README gallery (docs/gallery/*.png) with the project's own renderer.
+# Usage: scripts/gallery.sh   (after scripts/build.sh)
+set -euo pipefail
+root=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+vkrt="$root/build/vkrt"
+models="$root/../shared/models/meshes"
+out="$root/docs/gallery"
+mkdir -p "$out"
+size=320x320
+r() { "$vkrt" render "$@" --size "$size" -q; }
+r -o "$out/builtin_normal.png"
+r -o "$out/builtin_depth.png" --mode depth
+r "$models/bunny.obj" -o "$out/bunny_normal.png"
+r "$models/dragon_200k.obj" -o "$out/dragon_normal.png"
+r "$models/dragon_200k.obj" -o "$out/dragon_id.png" --mode id
+r "$models/dragon_200k.obj" -o "$out/dragon_heat_leaves_sah.png" --mode heatmap --heat leaves --heat-max 12
+r "$models/dragon_200k.obj" -o "$out/dragon_heat_leaves_midpoint.png" --mode heatmap --heat leaves --bvh midpoint --heat-max 12
+r "$models/dragon_200k.obj" -o "$out/dragon_heat_nodes_sah.png" --mode heatmap --heat nodes
+r "$models/armadillo_52k.obj" -o "$out/armadillo_depth.png" --mode depth
