@@ -67,3 +67,10 @@ else
   rm -rf "$work"
   echo "setup: cgltf.h taken from Debian's meshoptimizer source package into third_party/cache/cgltf"
 fi
+# cgltf 1.12 sets a primitive's attribute count before allocating the array, so when that
+# allocation fails its own cleanup walks a NULL array (tests/test_api.c, out of memory at every
+# allocation). One line in the cached copy (idempotent) keeps the count 0 on failure.
+cached="$cache/cgltf/cgltf.h"
+if [ -f "$cached" ] && ! grep -q 'vkrt: cgltf_free must not walk' "$cached"; then
+  sed -i 's|^\(\t\*out_attributes = (cgltf_attribute\*)cgltf_calloc(options, sizeof(cgltf_attribute), \*out_attributes_count);\)$|\1\n\tif (!*out_attributes) *out_attributes_count = 0; /* vkrt: cgltf_free must not walk a NULL array */|' "$cached"
+fi

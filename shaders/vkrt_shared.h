@@ -33,12 +33,15 @@ typedef struct vkrt_float3 { float x, y, z; } vkrt_float3;
 #define VKRT_BINDING_TRIS 1
 #define VKRT_BINDING_IMAGE 2
 #define VKRT_BINDING_HITS 3
+#define VKRT_BINDING_RAYS 4
 
 /* Specialization constant ids: features a render does not use are compiled out instead of
  * branched over (lavapipe pays nearly full price for an `if` that is false everywhere). */
 #define VKRT_SPEC_MODE 0
 #define VKRT_SPEC_TRAVERSAL 1
 #define VKRT_SPEC_HEAT 2
+#define VKRT_SPEC_RAYGEN 3
+#define VKRT_SPEC_ISECT 4
 
 /* Values of the specialization constants; the C side asserts they equal the public enums. */
 #define VKRT_GPU_MODE_NORMAL 1
@@ -50,6 +53,32 @@ typedef struct vkrt_float3 { float x, y, z; } vkrt_float3;
 #define VKRT_GPU_HEAT_NODES 1
 #define VKRT_GPU_HEAT_LEAVES 2
 #define VKRT_GPU_HEAT_TRIS 3
+#define VKRT_GPU_RAYGEN_CAMERA 1 /* one primary ray per pixel of a tile, into the image */
+#define VKRT_GPU_RAYGEN_BUFFER 2 /* the rays of the rays buffer, closest hits into the hits buffer */
+#define VKRT_GPU_ISECT_WATERTIGHT 1
+#define VKRT_GPU_ISECT_MOLLER_TRUMBORE 2
+
+/* Ray mode: rays traced per submission (and the size of the ray and hit buffers): 2^18 rays
+ * are 4,096 workgroups of 64, far below the 65,535 a dispatch may have, and keep a
+ * naive-traversal chunk of one submission to seconds on lavapipe. */
+#define VKRT_RAY_CHUNK 262144u
+#define VKRT_TRACE_GROUP_SIZE (VKRT_TRACE_GROUP_X * VKRT_TRACE_GROUP_Y)
+
+/* Conservative traversal (Ize, "Robust BVH Ray Traversal", JCGT 2(2), 2013): the far end of
+ * every slab interval is scaled by 1 + 2 gamma(3), gamma(n) = n eps / (1 - n eps), so
+ * rounding in (bound - origin) * (1 / dir) can never cull a box the exact ray enters.
+ * eps = 2^-24: 1 + 2 gamma(3) = 1 + 3 * 2^-23 (1 + 3 * 2^-24 + ...), rounded up to the next
+ * float, 1 + 4 * 2^-23. The double reference uses eps = 2^-53, rounded up the same way. */
+#define VKRT_TFAR_WIDEN_FLOAT 1.000000476837158203125
+#define VKRT_TFAR_WIDEN_DOUBLE 1.000000000000000888178419700125232338905334472656250
+
+/* Secondary-ray origins (ray_offset in src/ray_offset.c and shaders/trace_common.glsl; Wächter,
+ * Binder, Ray Tracing Gems ch. 6, 2019): 256 ulps per unit of normal covers the error of a hit
+ * point computed from barycentrics in float; below 1/32 in magnitude a coordinate's ulps get
+ * too small, and a fixed 1/65536 per unit of normal is used instead. */
+#define VKRT_OFFSET_ORIGIN (1.0 / 32.0)
+#define VKRT_OFFSET_FLOAT_SCALE (1.0 / 65536.0)
+#define VKRT_OFFSET_INT_SCALE 256.0
 
 /* Traversal stack entries. With the nearer child visited first and the farther one pushed,
  * the stack never holds more entries than the tree is deep, and every builder caps its depth
@@ -89,7 +118,9 @@ VKRT_STRUCT(vkrt_gpu_tri) {
     VKRT_UINT n2;          /* offset 60 */
 };
 
-/* Closest hit of one pixel, carried between naive-traversal chunk dispatches. 16 bytes. */
+/* Closest hit of one pixel or ray, carried between naive-traversal chunk dispatches. 16 bytes.
+ * Ray mode: the last dispatch writes the public vkrt_hit in place (t = -1 and
+ * tri = 0xFFFFFFFF on a miss, else tri = the hit triangle's prim_id). */
 VKRT_STRUCT(vkrt_gpu_hit) {
     float t;               /* offset  0; +inf while nothing was hit */
     VKRT_UINT tri;         /* offset  4; index into the triangle array (BVH order) */
@@ -107,7 +138,9 @@ VKRT_STRUCT(vkrt_gpu_ray) {
 
 /* Push constants of trace.comp, 96 bytes (Vulkan guarantees 128).
  * Primary ray through pixel (x, y), with sx = 2 (x + 0.5) / width - 1 and
- * sy = 1 - 2 (y + 0.5) / height: normalize(forward + sx * right + sy * up). */
+ * sy = 1 - 2 (y + 0.5) / height: normalize(forward + sx * right + sy * up).
+ * Ray mode (VKRT_GPU_RAYGEN_BUFFER): tile_width is the number of rays in the buffers, the
+ * camera and the other tile fields are unused; the tri_* fields and last_chunk as for images. */
 VKRT_STRUCT(vkrt_gpu_push) {
     VKRT_FLOAT3 eye;       /* offset  0 */
     VKRT_UINT width;       /* offset 12; whole image */

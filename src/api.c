@@ -1,5 +1,6 @@
 /* Public entry points: validate the caller's input, fill defaults, call the modules. */
 #include <math.h>
+#include <stddef.h>
 #include <stdio.h>
 #include <string.h>
 #include <unistd.h>
@@ -22,6 +23,17 @@ _Static_assert(VKRT_GPU_TRAVERSAL_BVH == VKRT_TRAVERSAL_BVH && VKRT_GPU_TRAVERSA
 _Static_assert(VKRT_GPU_HEAT_NODES == VKRT_HEAT_NODES && VKRT_GPU_HEAT_LEAVES == VKRT_HEAT_LEAVES &&
                    VKRT_GPU_HEAT_TRIS == VKRT_HEAT_TRIS,
                "shader heat values must equal vkrt_heat");
+_Static_assert(VKRT_GPU_ISECT_WATERTIGHT == VKRT_INTERSECTOR_WATERTIGHT &&
+                   VKRT_GPU_ISECT_MOLLER_TRUMBORE == VKRT_INTERSECTOR_MOLLER_TRUMBORE,
+               "shader intersector values must equal vkrt_intersector");
+/* vkrt_trace_rays hands the caller's arrays to the device as they are. */
+_Static_assert(sizeof(vkrt_ray) == sizeof(vkrt_gpu_ray) && offsetof(vkrt_ray, tmin) == offsetof(vkrt_gpu_ray, tmin) &&
+                   offsetof(vkrt_ray, dir) == offsetof(vkrt_gpu_ray, dir) &&
+                   offsetof(vkrt_ray, tmax) == offsetof(vkrt_gpu_ray, tmax),
+               "vkrt_ray must have the layout of vkrt_gpu_ray");
+_Static_assert(sizeof(vkrt_hit) == sizeof(vkrt_gpu_hit) && offsetof(vkrt_hit, prim_id) == offsetof(vkrt_gpu_hit, tri) &&
+                   offsetof(vkrt_hit, u) == offsetof(vkrt_gpu_hit, u) && offsetof(vkrt_hit, v) == offsetof(vkrt_gpu_hit, v),
+               "vkrt_hit must have the layout of vkrt_gpu_hit");
 
 static uint32_t online_cores(void)
 {
@@ -173,8 +185,12 @@ vkrt_result vkrt_scene_create(vkrt_context *ctx, const vkrt_scene_desc *desc, vk
     else if (d.mesh_count) r = meshes_from_memory(c, &d, &m);
     else r = mesh_make_builtin(c, &m);
     if (r != VKRT_OK) goto fail;
-    if (!d.keep_world_coordinates) mesh_normalize(&m);
-    else mesh_update_bounds(&m);
+    if (!d.keep_world_coordinates) {
+        const char *source = d.path ? d.path : d.mesh_count ? "in-memory scene" : "built-in scene";
+        if ((r = mesh_normalize(c, &m, source)) != VKRT_OK) goto fail;
+    } else {
+        mesh_update_bounds(&m);
+    }
     double load_ms = core_now_ms() - t0;
 
     bvh_build_desc bd = {
@@ -213,6 +229,22 @@ vkrt_result vkrt_scene_stats_get(const vkrt_scene *scene, vkrt_scene_stats *out_
 
 /* ---- rendering ---- */
 
+/* The intersector and precision fields shared by vkrt_render_desc and vkrt_trace_desc. */
+static vkrt_result check_tracing(vkrt_context *ctx, vkrt_intersector intersector, vkrt_precision precision,
+                                 const char *desc_name)
+{
+    core *c = &ctx->core;
+    if (intersector > VKRT_INTERSECTOR_MOLLER_TRUMBORE)
+        return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "%s.intersector has no valid value (%d)", desc_name, (int)intersector);
+    if (precision > VKRT_PRECISION_DOUBLE)
+        return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "%s.precision has no valid value (%d)", desc_name, (int)precision);
+    if (precision == VKRT_PRECISION_DOUBLE && ctx->vk)
+        return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT,
+                         "%s.precision: double precision needs the CPU backend (VKRT_BACKEND_CPU); the GPU traces in float",
+                         desc_name);
+    return VKRT_OK;
+}
+
 size_t vkrt_render_floats(uint32_t width, uint32_t height)
 {
     size_t pixels = (size_t)width * height;
@@ -241,12 +273,16 @@ vkrt_result vkrt_render(vkrt_context *ctx, vkrt_scene *scene, const vkrt_render_
     if (d.traversal > VKRT_TRAVERSAL_NAIVE)
         return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "vkrt_render_desc.traversal has no valid value (%d)", (int)d.traversal);
     if (d.heat > VKRT_HEAT_TRIS) return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "vkrt_render_desc.heat has no valid value (%d)", (int)d.heat);
+    vkrt_result r = check_tracing(ctx, d.intersector, d.precision, "vkrt_render_desc");
+    if (r != VKRT_OK) return r;
     size_t needed = vkrt_render_floats(d.width, d.height);
     if (out_floats < needed)
         return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "out_rgba holds %zu floats; a %ux%u image needs %zu", out_floats,
                          d.width, d.height, needed);
     vkrt_gpu_push camera = { 0 };
-    vkrt_result r = camera_setup(c, &d.camera, d.width, d.height, &camera);
+    camera_basis camera_d = { 0 };
+    r = camera_setup(c, &d.camera, d.width, d.height, &camera);
+    if (r == VKRT_OK && d.precision == VKRT_PRECISION_DOUBLE) r = camera_setup_double(c, &d.camera, d.width, d.height, &camera_d);
     if (r != VKRT_OK) return r;
     vkrt_mode mode = d.mode ? d.mode : VKRT_MODE_NORMAL;
     vkrt_traversal traversal = d.traversal ? d.traversal : VKRT_TRAVERSAL_BVH;
@@ -256,7 +292,7 @@ vkrt_result vkrt_render(vkrt_context *ctx, vkrt_scene *scene, const vkrt_render_
     double trace_ms = 0.0;
     if (ctx->vk) {
         gpu_trace_params p = {
-            .camera = camera, .mode = mode, .traversal = traversal, .heat = heat,
+            .camera = camera, .mode = mode, .traversal = traversal, .heat = heat, .intersector = d.intersector,
             .progress = d.progress, .progress_user = d.progress_user,
         };
         r = gpu_trace_render(ctx->vk, &scene->gpu, &p, out_rgba, &trace_ms);
@@ -266,7 +302,8 @@ vkrt_result vkrt_render(vkrt_context *ctx, vkrt_scene *scene, const vkrt_render_
             .tris = scene->tris, .tri_count = scene->bvh.tri_count,
         };
         cpu_trace_params p = {
-            .camera = camera, .mode = mode, .traversal = traversal, .heat = heat, .threads = ctx->cpu_threads,
+            .camera = camera, .mode = mode, .traversal = traversal, .heat = heat, .intersector = d.intersector,
+            .precision = d.precision, .camera_d = camera_d, .threads = ctx->cpu_threads,
             .progress = d.progress, .progress_user = d.progress_user,
         };
         r = cpu_trace_render(c, &s, &p, out_rgba);
@@ -276,6 +313,45 @@ vkrt_result vkrt_render(vkrt_context *ctx, vkrt_scene *scene, const vkrt_render_
         out_stats->trace_ms = trace_ms;
         out_stats->total_ms = core_now_ms() - t0;
         out_stats->rays = (uint64_t)d.width * d.height;
+    }
+    return r;
+}
+
+/* ---- arbitrary rays ---- */
+
+vkrt_result vkrt_trace_rays(vkrt_context *ctx, vkrt_scene *scene, const vkrt_trace_desc *desc, const vkrt_ray *rays,
+                            size_t count, vkrt_hit *out_hits)
+{
+    if (!ctx) return VKRT_ERROR_INVALID_ARGUMENT;
+    core *c = &ctx->core;
+    core_clear_error(c);
+    if (!scene) return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "scene is NULL");
+    if (scene->ctx != ctx) return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "the scene belongs to another context");
+    if (count && !rays) return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "rays is NULL");
+    if (count && !out_hits) return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "out_hits is NULL");
+    vkrt_trace_desc d = desc ? *desc : (vkrt_trace_desc){ 0 };
+    if (d.traversal > VKRT_TRAVERSAL_NAIVE)
+        return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "vkrt_trace_desc.traversal has no valid value (%d)", (int)d.traversal);
+    vkrt_result r = check_tracing(ctx, d.intersector, d.precision, "vkrt_trace_desc");
+    if (r != VKRT_OK) return r;
+    if (count == 0) return VKRT_OK;
+    vkrt_traversal traversal = d.traversal ? d.traversal : VKRT_TRAVERSAL_BVH;
+    if (ctx->vk) {
+        gpu_trace_rays_params p = {
+            .traversal = traversal, .intersector = d.intersector,
+            .progress = d.progress, .progress_user = d.progress_user,
+        };
+        r = gpu_trace_rays(ctx->vk, &scene->gpu, &p, rays, count, out_hits);
+    } else {
+        cpu_trace_scene s = {
+            .nodes = scene->bvh.nodes, .node_count = scene->bvh.node_count,
+            .tris = scene->tris, .tri_count = scene->bvh.tri_count,
+        };
+        cpu_trace_rays_params p = {
+            .traversal = traversal, .intersector = d.intersector, .precision = d.precision,
+            .threads = ctx->cpu_threads, .progress = d.progress, .progress_user = d.progress_user,
+        };
+        r = cpu_trace_rays(c, &s, &p, rays, count, out_hits);
     }
     return r;
 }

@@ -1,5 +1,6 @@
 /* Pinhole camera: the basis is computed once here, in double, and rounded to the float push
- * constants both tracers read, so the CPU and the GPU start every ray from identical bits. */
+ * constants both tracers read, so the CPU and the GPU start every ray from identical bits; the
+ * CPU double-precision reference keeps the double basis. */
 #include "camera.h"
 
 #include <math.h>
@@ -20,17 +21,22 @@ static dvec3 dcross(dvec3 a, dvec3 b)
 }
 static dvec3 dnormalize(dvec3 a) { return dscale(a, 1.0 / dlength(a)); }
 static dvec3 from_floats(const float f[3]) { return (dvec3){ f[0], f[1], f[2] }; }
-static vkrt_float3 to_float3(dvec3 a) { return (vkrt_float3){ (float)a.x, (float)a.y, (float)a.z }; }
+static vkrt_float3 to_float3(const double a[3]) { return (vkrt_float3){ (float)a[0], (float)a[1], (float)a[2] }; }
 
 static int all_finite(const float f[3])
 {
     return isfinite(f[0]) && isfinite(f[1]) && isfinite(f[2]);
 }
 
-vkrt_result camera_setup(core *c, const vkrt_camera *camera, uint32_t width, uint32_t height,
-                         vkrt_gpu_push *push)
+static void to_doubles(dvec3 a, double out[3])
 {
-    if (!camera || !push) return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "camera_setup: NULL argument");
+    out[0] = a.x, out[1] = a.y, out[2] = a.z;
+}
+
+vkrt_result camera_setup_double(core *c, const vkrt_camera *camera, uint32_t width, uint32_t height,
+                                camera_basis *out)
+{
+    if (!camera || !out) return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "camera_setup: NULL argument");
     if (width == 0 || height == 0)
         return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "image size %ux%u has a zero side", width, height);
     if (!all_finite(camera->eye))
@@ -72,10 +78,26 @@ vkrt_result camera_setup(core *c, const vkrt_camera *camera, uint32_t width, uin
     dvec3 right = dscale(right_unit, half * aspect);
     dvec3 up_scaled = dscale(dcross(right_unit, forward), half);
 
-    push->eye = to_float3(eye);
-    push->forward = to_float3(forward);
-    push->right = to_float3(right);
-    push->up = to_float3(up_scaled);
+    to_doubles(eye, out->eye);
+    to_doubles(forward, out->forward);
+    to_doubles(right, out->right);
+    to_doubles(up_scaled, out->up);
+    out->width = width;
+    out->height = height;
+    return VKRT_OK;
+}
+
+vkrt_result camera_setup(core *c, const vkrt_camera *camera, uint32_t width, uint32_t height,
+                         vkrt_gpu_push *push)
+{
+    if (!push) return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "camera_setup: NULL argument");
+    camera_basis b;
+    vkrt_result r = camera_setup_double(c, camera, width, height, &b);
+    if (r != VKRT_OK) return r;
+    push->eye = to_float3(b.eye);
+    push->forward = to_float3(b.forward);
+    push->right = to_float3(b.right);
+    push->up = to_float3(b.up);
     push->width = width;
     push->height = height;
     return VKRT_OK;

@@ -5,10 +5,21 @@
 #include "../shaders/vkrt_shared.h"
 #include "core.h"
 
+/* The ray-generation basis in double, before rounding to the push constants: what the CPU
+ * double-precision reference generates its rays from (same fields and meaning as in
+ * vkrt_gpu_push). */
+typedef struct camera_basis {
+    double eye[3], right[3], up[3], forward[3];
+    uint32_t width, height;
+} camera_basis;
+
 /* Resolves defaults (see vkrt_camera) and fills eye, right, up, forward, width and height of
  * *push. Fails with VKRT_ERROR_INVALID_ARGUMENT (message naming the field) for a non-finite
  * value, a field of view outside (0, 180), or an up vector parallel to the view direction. */
 vkrt_result camera_setup(core *c, const vkrt_camera *camera, uint32_t width, uint32_t height,
                          vkrt_gpu_push *push);
+/* The same checks and basis as camera_setup, kept in double. */
+vkrt_result camera_setup_double(core *c, const vkrt_camera *camera, uint32_t width, uint32_t height,
+                                camera_basis *out);
 
 #endif

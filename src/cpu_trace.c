@@ -1,11 +1,8 @@
-/* The C reference tracer. Every function below mirrors the GLSL function of the same name in
- * shaders/trace_common.glsl or shaders/trace.comp, with the arithmetic written in the same
- * order, so the two backends differ only by the rounding freedom GLSL grants the device.
- *
- * Triangle test: Möller, Trumbore, "Fast, Minimum Storage Ray/Triangle Intersection",
- * Journal of Graphics Tools 2(1), 1997. Box test: the slab method of Kay, Kajiya, "Ray
- * Tracing Complex Scenes", SIGGRAPH 1986, with the reciprocal direction of Williams et al.,
- * "An Efficient and Robust Ray-Box Intersection Algorithm", JGT 10(1), 2005. */
+/* The C reference tracer: cpu_trace_real.h holds the traversal and the triangle and box tests,
+ * instantiated here for float (the mirror of shaders/trace_common.glsl and trace.comp, with
+ * the arithmetic in the same order, so the two backends differ only by the rounding freedom
+ * GLSL grants the device) and for double (the reference). This file adds the per-mode
+ * outputs and the threads. Papers: see cpu_trace_real.h. */
 #include "cpu_trace.h"
 
 #include <math.h>
@@ -19,173 +16,47 @@
  * finish together and that a cancel is seen soon, large enough that the shared counter is
  * touched once per 256 rays. */
 #define TILE 16
+/* vkrt_trace_rays: rays per claimed block, for the same reasons. */
+#define RAY_BLOCK 1024
 #define NO_PRIM 0xFFFFFFFFu
 
 typedef vkrt_float3 vec3;
 
-static vec3 v_sub(vec3 a, vec3 b) { return (vec3){ a.x - b.x, a.y - b.y, a.z - b.z }; }
 static vec3 v_add(vec3 a, vec3 b) { return (vec3){ a.x + b.x, a.y + b.y, a.z + b.z }; }
-static vec3 v_mul(vec3 a, vec3 b) { return (vec3){ a.x * b.x, a.y * b.y, a.z * b.z }; }
 static vec3 v_scale(vec3 a, float s) { return (vec3){ a.x * s, a.y * s, a.z * s }; }
 static float v_dot(vec3 a, vec3 b) { return (a.x * b.x + a.y * b.y) + a.z * b.z; }
-static vec3 v_cross(vec3 a, vec3 b)
-{
-    return (vec3){ a.y * b.z - b.y * a.z, a.z * b.x - b.z * a.x, a.x * b.y - b.x * a.y };
-}
-static vec3 v_normalize(vec3 a) { return v_scale(a, 1.0f / sqrtf(v_dot(a, a))); }
-/* GLSL's definitions, including which operand wins for NaN. */
-static float f_min(float x, float y) { return y < x ? y : x; }
-static float f_max(float x, float y) { return x < y ? y : x; }
-static vec3 v_min(vec3 a, vec3 b) { return (vec3){ f_min(a.x, b.x), f_min(a.y, b.y), f_min(a.z, b.z) }; }
-static vec3 v_max(vec3 a, vec3 b) { return (vec3){ f_max(a.x, b.x), f_max(a.y, b.y), f_max(a.z, b.z) }; }
 
-typedef struct ray {
-    vec3 origin, dir, inv_dir;
-} ray;
-
-/* Closest hit so far; t = +inf with prim = NO_PRIM means none. */
+/* A closest hit as shading reads it (a double hit rounded); prim = NO_PRIM means none. */
 typedef struct hit {
     float t, u, v;
     uint32_t tri;  /* index into the triangle array (BVH order) */
-    uint32_t prim; /* its prim_id, the tie-breaker */
+    uint32_t prim; /* its prim_id */
 } hit;
 
 typedef struct heat_counts {
     uint32_t nodes, leaves, tris;
 } heat_counts;
 
-static ray camera_ray(const vkrt_gpu_push *p, uint32_t x, uint32_t y)
-{
-    float sx = 2.0f * ((float)x + 0.5f) / (float)p->width - 1.0f;
-    float sy = 1.0f - 2.0f * ((float)y + 0.5f) / (float)p->height;
-    ray r;
-    r.origin = p->eye;
-    r.dir = v_normalize(v_add(v_add(p->forward, v_scale(p->right, sx)), v_scale(p->up, sy)));
-    r.inv_dir = (vec3){ 1.0f / r.dir.x, 1.0f / r.dir.y, 1.0f / r.dir.z };
-    return r;
-}
+#define REAL float
+#define R(name) name##_f
+#define REAL_IS_FLOAT 1
+#define REAL_SQRT sqrtf
+#define REAL_INF INFINITY
+#define REAL_TFAR_WIDEN VKRT_TFAR_WIDEN_FLOAT
+#include "cpu_trace_real.h"
 
-static bool intersect_triangle(const ray *r, const vkrt_gpu_tri *tri, float *out_t, float *out_u, float *out_v)
-{
-    vec3 e1 = v_sub(tri->v1, tri->v0);
-    vec3 e2 = v_sub(tri->v2, tri->v0);
-    vec3 pvec = v_cross(r->dir, e2);
-    float det = v_dot(e1, pvec);
-    if (det == 0.0f) return false;
-    float inv_det = 1.0f / det;
-    vec3 tvec = v_sub(r->origin, tri->v0);
-    float u = v_dot(tvec, pvec) * inv_det;
-    vec3 qvec = v_cross(tvec, e1);
-    float v = v_dot(r->dir, qvec) * inv_det;
-    float t = v_dot(e2, qvec) * inv_det;
-    /* Written as acceptance so a NaN from a nearly parallel ray is rejected too. */
-    if (!(u >= 0.0f && v >= 0.0f && u + v <= 1.0f && t > 0.0f)) return false;
-    *out_t = t;
-    *out_u = u;
-    *out_v = v;
-    return true;
-}
-
-/* The shared closest-hit rule: nearer wins, and at equal distance the lower prim_id, so the
- * answer does not depend on the order triangles are visited (BVH vs naive, any builder). */
-static bool hit_closer(float t, uint32_t prim, float best_t, uint32_t best_prim)
-{
-    return t > 0.0f && (t < best_t || (t == best_t && prim < best_prim));
-}
-
-static void test_triangle(const ray *r, const vkrt_gpu_tri *tris, uint32_t index, hit *best)
-{
-    float t, u, v;
-    if (intersect_triangle(r, &tris[index], &t, &u, &v) && hit_closer(t, tris[index].prim_id, best->t, best->prim)) {
-        best->t = t;
-        best->u = u;
-        best->v = v;
-        best->tri = index;
-        best->prim = tris[index].prim_id;
-    }
-}
-
-static bool intersect_box(const ray *r, const vkrt_gpu_node *n, float best_t, float *out_tnear)
-{
-    vec3 t0 = v_mul(v_sub(n->bmin, r->origin), r->inv_dir);
-    vec3 t1 = v_mul(v_sub(n->bmax, r->origin), r->inv_dir);
-    vec3 tmin = v_min(t0, t1);
-    vec3 tmax = v_max(t0, t1);
-    float tnear = f_max(f_max(tmin.x, tmin.y), f_max(tmin.z, 0.0f));
-    float tfar = f_min(f_min(tmax.x, tmax.y), f_min(tmax.z, best_t));
-    *out_tnear = tnear;
-    return tnear <= tfar;
-}
-
-static void trace_bvh(const cpu_trace_scene *s, const ray *r, hit *best, heat_counts *heat)
-{
-    if (s->node_count == 0) return;
-    uint32_t stack_node[VKRT_TRAVERSAL_STACK_SIZE];
-    float stack_tnear[VKRT_TRAVERSAL_STACK_SIZE];
-    uint32_t sp = 0;
-    float tnear;
-    if (!intersect_box(r, &s->nodes[0], best->t, &tnear)) return;
-    heat->nodes++;
-    if (s->nodes[0].tri_count != 0) heat->leaves++;
-    uint32_t node = 0;
-    for (;;) {
-        const vkrt_gpu_node *n = &s->nodes[node];
-        bool descend = false;
-        if (n->tri_count != 0) {
-            for (uint32_t i = n->left_first; i < n->left_first + n->tri_count; i++) {
-                heat->tris++;
-                test_triangle(r, s->tris, i, best);
-            }
-        } else {
-            uint32_t left = n->left_first, right = left + 1;
-            float tl, tr;
-            bool hit_l = intersect_box(r, &s->nodes[left], best->t, &tl);
-            bool hit_r = intersect_box(r, &s->nodes[right], best->t, &tr);
-            if (hit_l) {
-                heat->nodes++;
-                if (s->nodes[left].tri_count != 0) heat->leaves++;
-            }
-            if (hit_r) {
-                heat->nodes++;
-                if (s->nodes[right].tri_count != 0) heat->leaves++;
-            }
-            if (hit_l && hit_r) {
-                uint32_t far_node = tr < tl ? left : right;
-                float far_t = tr < tl ? tl : tr;
-                node = tr < tl ? right : left;
-                /* Never full for a BVH within VKRT_MAX_BVH_DEPTH: one entry per level above. */
-                if (sp < VKRT_TRAVERSAL_STACK_SIZE) {
-                    stack_node[sp] = far_node;
-                    stack_tnear[sp] = far_t;
-                    sp++;
-                }
-                descend = true;
-            } else if (hit_l) {
-                node = left;
-                descend = true;
-            } else if (hit_r) {
-                node = right;
-                descend = true;
-            }
-        }
-        if (descend) continue;
-        /* A pushed box that starts beyond the closest hit found since cannot improve it. */
-        while (sp > 0 && stack_tnear[sp - 1] > best->t) sp--;
-        if (sp == 0) break;
-        sp--;
-        node = stack_node[sp];
-    }
-}
-
-static void trace_naive(const cpu_trace_scene *s, const ray *r, hit *best)
-{
-    for (uint32_t i = 0; i < s->tri_count; i++) test_triangle(r, s->tris, i, best);
-}
+#define REAL double
+#define R(name) name##_d
+#define REAL_IS_FLOAT 0
+#define REAL_SQRT sqrt
+#define REAL_INF ((double)INFINITY)
+#define REAL_TFAR_WIDEN VKRT_TFAR_WIDEN_DOUBLE
+#include "cpu_trace_real.h"
 
 static void shade(const cpu_trace_scene *s, const cpu_trace_params *p, const hit *best, const heat_counts *heat,
                   float out[4])
 {
-    bool is_hit = best->t < INFINITY;
+    bool is_hit = best->prim != NO_PRIM;
     switch (p->mode) {
     case VKRT_MODE_HEATMAP: {
         uint32_t count = p->heat == VKRT_HEAT_LEAVES ? heat->leaves : p->heat == VKRT_HEAT_TRIS ? heat->tris : heat->nodes;
@@ -222,102 +93,181 @@ static void shade(const cpu_trace_scene *s, const cpu_trace_params *p, const hit
     }
 }
 
-static void trace_pixel(const cpu_trace_scene *s, const cpu_trace_params *p, uint32_t x, uint32_t y, float out[4])
+/* ---- threads ---- */
+
+typedef struct job job;
+/* Traces work item `item` (a tile or a block of rays); false when cancelled midway. */
+typedef bool (*job_item_fn)(job *j, size_t item);
+
+struct job {
+    job_item_fn run_item;
+    size_t items;
+    atomic_size_t next_item;
+    atomic_size_t done_items;
+    atomic_bool cancel;
+    const cpu_trace_scene *scene;
+    /* render */
+    const cpu_trace_params *params;
+    camera_f cam_f;
+    camera_d cam_d;
+    float *out;
+    uint32_t tiles_x;
+    /* rays */
+    const cpu_trace_rays_params *rays_params;
+    const vkrt_ray *rays;
+    size_t ray_count;
+    vkrt_hit *hits;
+};
+
+static void trace_pixel(const job *j, uint32_t x, uint32_t y, float out[4])
 {
+    const cpu_trace_scene *s = j->scene;
+    const cpu_trace_params *p = j->params;
     hit best = { .t = INFINITY, .tri = NO_PRIM, .prim = NO_PRIM };
     heat_counts heat = { 0 };
-    if (p->traversal == VKRT_TRAVERSAL_NAIVE) {
-        heat.tris = s->tri_count;
-        /* Naive heat is tri_count whatever the ray does, so the heatmap skips the tests. */
-        if (p->mode != VKRT_MODE_HEATMAP) {
-            ray r = camera_ray(&p->camera, x, y);
-            trace_naive(s, &r, &best);
+    if (p->traversal == VKRT_TRAVERSAL_NAIVE) heat.tris = s->tri_count;
+    /* Naive heat is tri_count whatever the ray does, so the heatmap skips the tests. */
+    if (p->traversal != VKRT_TRAVERSAL_NAIVE || p->mode != VKRT_MODE_HEATMAP) {
+        if (p->precision == VKRT_PRECISION_DOUBLE) {
+            ray_d r = camera_ray_d(&j->cam_d, x, y);
+            best = trace_ray_d(s, p->traversal, p->intersector, &r, &heat);
+        } else {
+            ray_f r = camera_ray_f(&j->cam_f, x, y);
+            best = trace_ray_f(s, p->traversal, p->intersector, &r, &heat);
         }
-    } else {
-        ray r = camera_ray(&p->camera, x, y);
-        trace_bvh(s, &r, &best, &heat);
     }
     shade(s, p, &best, &heat, out);
 }
 
-/* ---- threads ---- */
-
-typedef struct job {
-    const cpu_trace_scene *scene;
-    const cpu_trace_params *params;
-    float *out;
-    uint32_t tiles_x, tiles;
-    atomic_uint next_tile;
-    atomic_uint done_tiles;
-    atomic_bool cancel;
-} job;
-
-/* Claims and traces one tile; false when none is left or the render was cancelled. */
-static bool run_one_tile(job *j)
+static bool run_tile(job *j, size_t t)
 {
-    if (atomic_load_explicit(&j->cancel, memory_order_relaxed)) return false;
-    uint32_t t = atomic_fetch_add_explicit(&j->next_tile, 1, memory_order_relaxed);
-    if (t >= j->tiles) return false;
     const uint32_t width = j->params->camera.width, height = j->params->camera.height;
-    uint32_t x0 = (t % j->tiles_x) * TILE, y0 = (t / j->tiles_x) * TILE;
+    uint32_t x0 = (uint32_t)(t % j->tiles_x) * TILE, y0 = (uint32_t)(t / j->tiles_x) * TILE;
     uint32_t x1 = x0 + TILE < width ? x0 + TILE : width, y1 = y0 + TILE < height ? y0 + TILE : height;
     for (uint32_t y = y0; y < y1; y++) {
         /* Checked per row so a cancel stops a slow (naive, large) tile early. */
         if (atomic_load_explicit(&j->cancel, memory_order_relaxed)) return false;
-        for (uint32_t x = x0; x < x1; x++)
-            trace_pixel(j->scene, j->params, x, y, j->out + ((size_t)y * width + x) * 4);
+        for (uint32_t x = x0; x < x1; x++) trace_pixel(j, x, y, j->out + ((size_t)y * width + x) * 4);
     }
-    atomic_fetch_add_explicit(&j->done_tiles, 1, memory_order_relaxed);
+    return true;
+}
+
+static vkrt_hit trace_one_ray(const job *j, const vkrt_ray *in)
+{
+    const cpu_trace_rays_params *p = j->rays_params;
+    heat_counts heat = { 0 };
+    hit best = { .prim = NO_PRIM };
+    if (p->precision == VKRT_PRECISION_DOUBLE) {
+        ray_d r;
+        if (ray_from_buffer_d(in, &r)) best = trace_ray_d(j->scene, p->traversal, p->intersector, &r, &heat);
+    } else {
+        ray_f r;
+        if (ray_from_buffer_f(in, &r)) best = trace_ray_f(j->scene, p->traversal, p->intersector, &r, &heat);
+    }
+    if (best.prim == NO_PRIM) return (vkrt_hit){ .t = -1.0f, .prim_id = VKRT_NO_HIT };
+    return (vkrt_hit){ .t = best.t, .prim_id = best.prim, .u = best.u, .v = best.v };
+}
+
+static bool run_ray_block(job *j, size_t block)
+{
+    size_t first = block * RAY_BLOCK, end = first + RAY_BLOCK < j->ray_count ? first + RAY_BLOCK : j->ray_count;
+    for (size_t i = first; i < end; i++) {
+        /* Checked every 64 rays so a cancel stops a slow (naive) block early. */
+        if ((i & 63) == 0 && atomic_load_explicit(&j->cancel, memory_order_relaxed)) return false;
+        j->hits[i] = trace_one_ray(j, &j->rays[i]);
+    }
+    return true;
+}
+
+/* Claims and traces one item; false when none is left or the job was cancelled. */
+static bool run_one_item(job *j)
+{
+    if (atomic_load_explicit(&j->cancel, memory_order_relaxed)) return false;
+    size_t t = atomic_fetch_add_explicit(&j->next_item, 1, memory_order_relaxed);
+    if (t >= j->items) return false;
+    if (!j->run_item(j, t)) return false;
+    atomic_fetch_add_explicit(&j->done_items, 1, memory_order_relaxed);
     return true;
 }
 
 static void *worker_main(void *arg)
 {
     job *j = arg;
-    while (run_one_tile(j)) {
+    while (run_one_item(j)) {
     }
     return NULL;
+}
+
+/* Runs j->items items on `threads` threads, the caller one of them. */
+static vkrt_result run_job(core *c, job *j, uint32_t threads, vkrt_progress_fn progress, void *progress_user)
+{
+    atomic_init(&j->next_item, 0);
+    atomic_init(&j->done_items, 0);
+    atomic_init(&j->cancel, false);
+    uint32_t helpers = threads > 1 ? threads - 1 : 0;
+    if (helpers > j->items) helpers = (uint32_t)j->items;
+    pthread_t *workers = NULL;
+    if (helpers) {
+        workers = core_alloc_array(c, helpers, sizeof *workers);
+        if (!workers) return core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "out of memory for %u trace threads", helpers);
+    }
+    uint32_t started = 0;
+    vkrt_result r = VKRT_OK;
+    for (; started < helpers; started++) {
+        if (pthread_create(&workers[started], NULL, worker_main, j) != 0) {
+            atomic_store(&j->cancel, true);
+            r = core_fail(c, VKRT_ERROR_LIMIT, "could not start trace thread %u of %u", started + 1, helpers);
+            break;
+        }
+    }
+    /* The calling thread traces too, and between its items it alone reports progress, so the
+     * callback never runs on a worker. */
+    while (r == VKRT_OK && run_one_item(j)) {
+        if (progress) {
+            float fraction = (float)atomic_load_explicit(&j->done_items, memory_order_relaxed) / (float)j->items;
+            if (!progress(progress_user, "trace", fraction)) {
+                atomic_store(&j->cancel, true);
+                r = core_fail(c, VKRT_ERROR_CANCELLED, "trace cancelled by the progress callback");
+            }
+        }
+    }
+    for (uint32_t i = 0; i < started; i++) pthread_join(workers[i], NULL);
+    core_free(c, workers);
+    if (r == VKRT_OK && progress) progress(progress_user, "trace", 1.0f);
+    return r;
 }
 
 vkrt_result cpu_trace_render(core *c, const cpu_trace_scene *scene, const cpu_trace_params *params, float *out_rgba)
 {
     const uint32_t width = params->camera.width, height = params->camera.height;
-    job j = { .scene = scene, .params = params, .out = out_rgba };
+    const vkrt_gpu_push *p = &params->camera;
+    const camera_basis *b = &params->camera_d;
+    job j = {
+        .run_item = run_tile,
+        .scene = scene,
+        .params = params,
+        .cam_f = { v_load_f(p->eye), v_load_f(p->right), v_load_f(p->up), v_load_f(p->forward), width, height },
+        .cam_d = { { b->eye[0], b->eye[1], b->eye[2] }, { b->right[0], b->right[1], b->right[2] },
+                   { b->up[0], b->up[1], b->up[2] }, { b->forward[0], b->forward[1], b->forward[2] }, width, height },
+        .out = out_rgba,
+    };
     j.tiles_x = (width + TILE - 1) / TILE;
-    j.tiles = j.tiles_x * ((height + TILE - 1) / TILE);
-    atomic_init(&j.next_tile, 0);
-    atomic_init(&j.done_tiles, 0);
-    atomic_init(&j.cancel, false);
+    j.items = (size_t)j.tiles_x * ((height + TILE - 1) / TILE);
+    return run_job(c, &j, params->threads, params->progress, params->progress_user);
+}
 
-    uint32_t helpers = params->threads > 1 ? params->threads - 1 : 0;
-    if (helpers > j.tiles) helpers = j.tiles;
-    pthread_t *threads = NULL;
-    if (helpers) {
-        threads = core_alloc_array(c, helpers, sizeof *threads);
-        if (!threads) return core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "out of memory for %u trace threads", helpers);
-    }
-    uint32_t started = 0;
-    vkrt_result r = VKRT_OK;
-    for (; started < helpers; started++) {
-        if (pthread_create(&threads[started], NULL, worker_main, &j) != 0) {
-            atomic_store(&j.cancel, true);
-            r = core_fail(c, VKRT_ERROR_LIMIT, "could not start trace thread %u of %u", started + 1, helpers);
-            break;
-        }
-    }
-    /* The calling thread traces too, and between its tiles it alone reports progress, so the
-     * callback never runs on a worker. */
-    while (r == VKRT_OK && run_one_tile(&j)) {
-        if (params->progress) {
-            float fraction = (float)atomic_load_explicit(&j.done_tiles, memory_order_relaxed) / (float)j.tiles;
-            if (!params->progress(params->progress_user, "trace", fraction)) {
-                atomic_store(&j.cancel, true);
-                r = core_fail(c, VKRT_ERROR_CANCELLED, "render cancelled by the progress callback");
-            }
-        }
-    }
-    for (uint32_t i = 0; i < started; i++) pthread_join(threads[i], NULL);
-    core_free(c, threads);
-    if (r == VKRT_OK && params->progress) params->progress(params->progress_user, "trace", 1.0f);
-    return r;
+vkrt_result cpu_trace_rays(core *c, const cpu_trace_scene *scene, const cpu_trace_rays_params *params,
+                           const vkrt_ray *rays, size_t count, vkrt_hit *out_hits)
+{
+    job j = {
+        .run_item = run_ray_block,
+        .items = (count + RAY_BLOCK - 1) / RAY_BLOCK,
+        .scene = scene,
+        .rays_params = params,
+        .rays = rays,
+        .ray_count = count,
+        .hits = out_hits,
+    };
+    if (j.items == 0) return VKRT_OK;
+    return run_job(c, &j, params->threads, params->progress, params->progress_user);
 }

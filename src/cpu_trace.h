@@ -1,10 +1,12 @@
-/* The C reference tracer: the same camera, traversal, triangle test and per-mode outputs as
+/* The C reference tracer: the same camera, traversal, triangle tests and per-mode outputs as
  * shaders/trace.comp, over the same packed node and triangle arrays, multi-threaded over
- * tiles. Everything the GPU image is checked against comes from here. */
+ * tiles (or blocks of rays), in float (as the GPU) or double (the reference for every error
+ * figure). Everything the GPU is checked against comes from here. */
 #ifndef VKRT_CPU_TRACE_H
 #define VKRT_CPU_TRACE_H
 
 #include "../shaders/vkrt_shared.h"
+#include "camera.h"
 #include "core.h"
 
 typedef struct cpu_trace_scene {
@@ -20,6 +22,9 @@ typedef struct cpu_trace_params {
     vkrt_mode mode;             /* resolved: never _DEFAULT */
     vkrt_traversal traversal;   /* resolved */
     vkrt_heat heat;             /* resolved */
+    vkrt_intersector intersector; /* _DEFAULT: watertight */
+    vkrt_precision precision;   /* _DEFAULT: float; double traces from camera_d */
+    camera_basis camera_d;      /* double precision only: the unrounded basis (camera_setup_double) */
     uint32_t threads;           /* >= 1 */
     vkrt_progress_fn progress;  /* may be NULL; called from the calling thread */
     void *progress_user;
@@ -29,5 +34,19 @@ typedef struct cpu_trace_params {
  * VKRT_ERROR_OUT_OF_MEMORY / a thread-creation failure as VKRT_ERROR_LIMIT. */
 vkrt_result cpu_trace_render(core *c, const cpu_trace_scene *scene, const cpu_trace_params *params,
                              float *out_rgba);
+
+typedef struct cpu_trace_rays_params {
+    vkrt_traversal traversal;     /* resolved */
+    vkrt_intersector intersector; /* _DEFAULT: watertight */
+    vkrt_precision precision;     /* _DEFAULT: float */
+    uint32_t threads;             /* >= 1 */
+    vkrt_progress_fn progress;    /* may be NULL; called from the calling thread */
+    void *progress_user;
+} cpu_trace_rays_params;
+
+/* The closest hit of each ray (see vkrt_trace_rays), threads over blocks of rays. Returns as
+ * cpu_trace_render. */
+vkrt_result cpu_trace_rays(core *c, const cpu_trace_scene *scene, const cpu_trace_rays_params *params,
+                           const vkrt_ray *rays, size_t count, vkrt_hit *out_hits);
 
 #endif

@@ -47,14 +47,16 @@ void gpu_scene_destroy(vk_context *vk, gpu_scene *s)
     vk_buffer_destroy(vk, &s->tris);
 }
 
-/* Per-render device objects: one tile-sized storage image, its readback buffer, the hit buffer
- * of naive traversal, a descriptor set and a timestamp query pool. */
+/* Per-call device objects: one tile-sized storage image (1x1 for rays), the readback buffer,
+ * the hit buffer (naive traversal's carried hits; the output of rays), the ray buffer, a
+ * descriptor set and a timestamp query pool. */
 typedef struct render_objects {
     VkImage image;
     VkDeviceMemory image_memory;
     VkImageView view;
     vk_buffer readback;
     vk_buffer hits;
+    vk_buffer rays;
     VkDescriptorPool pool;
     VkDescriptorSet set;
     VkQueryPool queries;
@@ -69,6 +71,7 @@ static void render_objects_destroy(vk_context *vk, render_objects *o)
     if (o->image_memory) vkFreeMemory(vk->device, o->image_memory, NULL);
     vk_buffer_destroy(vk, &o->readback);
     vk_buffer_destroy(vk, &o->hits);
+    vk_buffer_destroy(vk, &o->rays);
 }
 
 static vkrt_result create_image(vk_context *vk, uint32_t w, uint32_t h, render_objects *o)
@@ -123,7 +126,7 @@ static vkrt_result create_descriptors(vk_context *vk, const gpu_scene *scene, Vk
                                       render_objects *o)
 {
     VkDescriptorPoolSize sizes[] = {
-        { VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 3 },
+        { VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 4 },
         { VK_DESCRIPTOR_TYPE_STORAGE_IMAGE, 1 },
     };
     VkDescriptorPoolCreateInfo pool_info = {
@@ -145,6 +148,7 @@ static vkrt_result create_descriptors(vk_context *vk, const gpu_scene *scene, Vk
     VkDescriptorBufferInfo nodes = { scene->nodes.buffer, 0, VK_WHOLE_SIZE };
     VkDescriptorBufferInfo tris = { scene->tris.buffer, 0, VK_WHOLE_SIZE };
     VkDescriptorBufferInfo hits = { o->hits.buffer, 0, VK_WHOLE_SIZE };
+    VkDescriptorBufferInfo rays = { o->rays.buffer, 0, VK_WHOLE_SIZE };
     VkDescriptorImageInfo image = { VK_NULL_HANDLE, o->view, VK_IMAGE_LAYOUT_GENERAL };
     VkWriteDescriptorSet writes[] = {
         { .sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET, .dstSet = o->set, .dstBinding = VKRT_BINDING_NODES,
@@ -155,26 +159,36 @@ static vkrt_result create_descriptors(vk_context *vk, const gpu_scene *scene, Vk
           .descriptorCount = 1, .descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_IMAGE, .pImageInfo = &image },
         { .sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET, .dstSet = o->set, .dstBinding = VKRT_BINDING_HITS,
           .descriptorCount = 1, .descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, .pBufferInfo = &hits },
+        { .sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET, .dstSet = o->set, .dstBinding = VKRT_BINDING_RAYS,
+          .descriptorCount = 1, .descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, .pBufferInfo = &rays },
     };
     vkUpdateDescriptorSets(vk->device, sizeof writes / sizeof writes[0], writes, 0, NULL);
     return VKRT_OK;
 }
 
+/* Image mode: a tile_w x tile_h image, hit_count = pixels for naive traversal (else 1), no
+ * rays. Ray mode: a 1x1 image (the layout has the binding), hit_count = ray_count rays. */
 static vkrt_result create_render_objects(vk_context *vk, const gpu_scene *scene, VkDescriptorSetLayout layout,
-                                         uint32_t tile_w, uint32_t tile_h, bool naive, render_objects *o)
+                                         uint32_t tile_w, uint32_t tile_h, uint32_t hit_count, uint32_t ray_count,
+                                         render_objects *o)
 {
     memset(o, 0, sizeof *o);
     vkrt_result r = create_image(vk, tile_w, tile_h, o);
-    VkDeviceSize pixels = (VkDeviceSize)tile_w * tile_h;
+    VkDeviceSize readback = ray_count ? (VkDeviceSize)ray_count * sizeof(vkrt_gpu_hit)
+                                      : (VkDeviceSize)tile_w * tile_h * 4 * sizeof(float);
     if (r == VKRT_OK)
-        r = vk_buffer_create(vk, pixels * 4 * sizeof(float), VK_BUFFER_USAGE_TRANSFER_DST_BIT, VK_MEMORY_READBACK,
-                             "vkrt readback", &o->readback);
-    /* BVH traversal never reads the hit buffer, but the layout has the binding, so it gets a
-     * minimal one. */
+        r = vk_buffer_create(vk, readback, VK_BUFFER_USAGE_TRANSFER_DST_BIT, VK_MEMORY_READBACK, "vkrt readback",
+                             &o->readback);
+    /* Every binding of the layout gets a buffer; one the variant never reads gets a minimal one. */
     if (r == VKRT_OK)
-        r = vk_buffer_create(vk, (naive ? pixels : 1) * sizeof(vkrt_gpu_hit),
+        r = vk_buffer_create(vk, (VkDeviceSize)(hit_count ? hit_count : 1) * sizeof(vkrt_gpu_hit),
+                             VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT |
+                                 VK_BUFFER_USAGE_TRANSFER_SRC_BIT,
+                             VK_MEMORY_DEVICE, "vkrt hits", &o->hits);
+    if (r == VKRT_OK)
+        r = vk_buffer_create(vk, (VkDeviceSize)(ray_count ? ray_count : 1) * sizeof(vkrt_gpu_ray),
                              VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT, VK_MEMORY_DEVICE,
-                             "vkrt hits", &o->hits);
+                             "vkrt rays", &o->rays);
     if (r == VKRT_OK) r = create_descriptors(vk, scene, layout, o);
     if (r == VKRT_OK && vk->timestamps) {
         VkQueryPoolCreateInfo q = {
@@ -207,19 +221,71 @@ static uint32_t gpu_heat(vkrt_heat h)
     }
 }
 
+static uint32_t gpu_isect(vkrt_intersector i)
+{
+    return i == VKRT_INTERSECTOR_MOLLER_TRUMBORE ? VKRT_GPU_ISECT_MOLLER_TRUMBORE : VKRT_GPU_ISECT_WATERTIGHT;
+}
+
 static uint32_t div_up(uint32_t a, uint32_t b)
 {
     return (a + b - 1) / b;
 }
 
-/* Records one tile: trace dispatch(es), then a copy of the tile image into the readback buffer. */
-static void record_tile(VkCommandBuffer cmd, const vk_trace_pipeline *pipe, const render_objects *o,
-                        const gpu_scene *scene, vkrt_gpu_push push, bool naive, bool first_tile)
+/* One buffer barrier over the whole buffer. */
+static void record_buffer_barrier(VkCommandBuffer cmd, VkBuffer buffer, VkPipelineStageFlags src_stage,
+                                  VkAccessFlags src_access, VkPipelineStageFlags dst_stage, VkAccessFlags dst_access)
 {
-    /* The image's previous contents (an earlier tile, already copied out) are discarded. */
+    VkBufferMemoryBarrier b = {
+        .sType = VK_STRUCTURE_TYPE_BUFFER_MEMORY_BARRIER,
+        .srcAccessMask = src_access,
+        .dstAccessMask = dst_access,
+        .srcQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED,
+        .dstQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED,
+        .buffer = buffer,
+        .size = VK_WHOLE_SIZE,
+    };
+    vkCmdPipelineBarrier(cmd, src_stage, dst_stage, 0, 0, NULL, 1, &b, 0, NULL);
+}
+
+/* Naive traversal: the hit buffer cleared, then one dispatch per chunk of
+ * VKRT_NAIVE_CHUNK_TRIS triangles, each reading the closest hits the one before wrote. */
+static void record_naive_chunks(VkCommandBuffer cmd, const vk_trace_pipeline *pipe, const render_objects *o,
+                                const gpu_scene *scene, vkrt_gpu_push push, uint32_t groups_x, uint32_t groups_y)
+{
+    /* t = +inf (0x7f800000) and no triangle (0xffffffff) would need two fills; a fill of
+     * the whole record with 0x7f800000 gives t = +inf, and the shader treats any hit with
+     * t = +inf as none, so one fill suffices. */
+    vkCmdFillBuffer(cmd, o->hits.buffer, 0, VK_WHOLE_SIZE, 0x7f800000u);
+    /* The first chunk reads the cleared hits. */
+    record_buffer_barrier(cmd, o->hits.buffer, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_WRITE_BIT,
+                          VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT);
+    for (uint32_t first = 0; first < scene->tri_count; first += VKRT_NAIVE_CHUNK_TRIS) {
+        push.tri_first = first;
+        push.tri_end = scene->tri_count - first > VKRT_NAIVE_CHUNK_TRIS ? first + VKRT_NAIVE_CHUNK_TRIS
+                                                                        : scene->tri_count;
+        push.last_chunk = push.tri_end == scene->tri_count;
+        vkCmdPushConstants(cmd, pipe->layout, VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof push, &push);
+        vkCmdDispatch(cmd, groups_x, groups_y, 1);
+        if (!push.last_chunk) {
+            /* Each chunk reads the closest hit the previous chunk wrote. */
+            VkMemoryBarrier chunk_done = {
+                .sType = VK_STRUCTURE_TYPE_MEMORY_BARRIER,
+                .srcAccessMask = VK_ACCESS_SHADER_WRITE_BIT,
+                .dstAccessMask = VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT,
+            };
+            vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 0,
+                                 1, &chunk_done, 0, NULL, 0, NULL);
+        }
+    }
+}
+
+/* The image to GENERAL for the shader's writes; its previous contents (an earlier tile, already
+ * copied out) are discarded. Returns the barrier for the transition back. */
+static VkImageMemoryBarrier record_image_to_general(VkCommandBuffer cmd, const render_objects *o, bool first)
+{
     VkImageMemoryBarrier to_general = {
         .sType = VK_STRUCTURE_TYPE_IMAGE_MEMORY_BARRIER,
-        .srcAccessMask = first_tile ? 0 : VK_ACCESS_TRANSFER_READ_BIT,
+        .srcAccessMask = first ? 0 : VK_ACCESS_TRANSFER_READ_BIT,
         .dstAccessMask = VK_ACCESS_SHADER_WRITE_BIT,
         .oldLayout = VK_IMAGE_LAYOUT_UNDEFINED,
         .newLayout = VK_IMAGE_LAYOUT_GENERAL,
@@ -228,55 +294,38 @@ static void record_tile(VkCommandBuffer cmd, const vk_trace_pipeline *pipe, cons
         .image = o->image,
         .subresourceRange = { VK_IMAGE_ASPECT_COLOR_BIT, 0, 1, 0, 1 },
     };
-    vkCmdPipelineBarrier(cmd, first_tile ? VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT : VK_PIPELINE_STAGE_TRANSFER_BIT,
+    vkCmdPipelineBarrier(cmd, first ? VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT : VK_PIPELINE_STAGE_TRANSFER_BIT,
                          VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 0, 0, NULL, 0, NULL, 1, &to_general);
+    return to_general;
+}
+
+/* The trace dispatch(es) over groups_x x groups_y workgroups, between two timestamps. */
+static void record_dispatches(VkCommandBuffer cmd, const vk_trace_pipeline *pipe, const render_objects *o,
+                              const gpu_scene *scene, vkrt_gpu_push push, bool naive, uint32_t groups_x,
+                              uint32_t groups_y)
+{
     if (o->queries) {
         vkCmdResetQueryPool(cmd, o->queries, 0, 2);
         vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, o->queries, 0);
     }
     vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, pipe->pipeline);
     vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, pipe->layout, 0, 1, &o->set, 0, NULL);
-    uint32_t groups_x = div_up(push.tile_width, VKRT_TRACE_GROUP_X);
-    uint32_t groups_y = div_up(push.tile_height, VKRT_TRACE_GROUP_Y);
     if (!naive) {
         vkCmdPushConstants(cmd, pipe->layout, VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof push, &push);
         vkCmdDispatch(cmd, groups_x, groups_y, 1);
     } else {
-        /* t = +inf (0x7f800000) and no triangle (0xffffffff) would need two fills; a fill of
-         * the whole record with 0x7f800000 gives t = +inf, and the shader treats any hit with
-         * t = +inf as none, so one fill suffices. */
-        vkCmdFillBuffer(cmd, o->hits.buffer, 0, VK_WHOLE_SIZE, 0x7f800000u);
-        VkBufferMemoryBarrier fill_done = {
-            .sType = VK_STRUCTURE_TYPE_BUFFER_MEMORY_BARRIER,
-            .srcAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT,
-            .dstAccessMask = VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT,
-            .srcQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED,
-            .dstQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED,
-            .buffer = o->hits.buffer,
-            .size = VK_WHOLE_SIZE,
-        };
-        vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 0, 0, NULL, 1,
-                             &fill_done, 0, NULL);
-        for (uint32_t first = 0; first < scene->tri_count; first += VKRT_NAIVE_CHUNK_TRIS) {
-            push.tri_first = first;
-            push.tri_end = scene->tri_count - first > VKRT_NAIVE_CHUNK_TRIS ? first + VKRT_NAIVE_CHUNK_TRIS
-                                                                            : scene->tri_count;
-            push.last_chunk = push.tri_end == scene->tri_count;
-            vkCmdPushConstants(cmd, pipe->layout, VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof push, &push);
-            vkCmdDispatch(cmd, groups_x, groups_y, 1);
-            if (!push.last_chunk) {
-                /* Each chunk reads the closest hit the previous chunk wrote. */
-                VkMemoryBarrier chunk_done = {
-                    .sType = VK_STRUCTURE_TYPE_MEMORY_BARRIER,
-                    .srcAccessMask = VK_ACCESS_SHADER_WRITE_BIT,
-                    .dstAccessMask = VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT,
-                };
-                vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 0,
-                                     1, &chunk_done, 0, NULL, 0, NULL);
-            }
-        }
+        record_naive_chunks(cmd, pipe, o, scene, push, groups_x, groups_y);
     }
     if (o->queries) vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, o->queries, 1);
+}
+
+/* Records one tile: trace dispatch(es), then a copy of the tile image into the readback buffer. */
+static void record_tile(VkCommandBuffer cmd, const vk_trace_pipeline *pipe, const render_objects *o,
+                        const gpu_scene *scene, vkrt_gpu_push push, bool naive, bool first_tile)
+{
+    VkImageMemoryBarrier to_general = record_image_to_general(cmd, o, first_tile);
+    record_dispatches(cmd, pipe, o, scene, push, naive, div_up(push.tile_width, VKRT_TRACE_GROUP_X),
+                      div_up(push.tile_height, VKRT_TRACE_GROUP_Y));
     /* The copy reads what the shader wrote. */
     VkImageMemoryBarrier to_transfer = to_general;
     to_transfer.srcAccessMask = VK_ACCESS_SHADER_WRITE_BIT;
@@ -293,17 +342,8 @@ static void record_tile(VkCommandBuffer cmd, const vk_trace_pipeline *pipe, cons
     };
     vkCmdCopyImageToBuffer(cmd, o->image, VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL, o->readback.buffer, 1, &region);
     /* The host reads the readback buffer after the fence. */
-    VkBufferMemoryBarrier to_host = {
-        .sType = VK_STRUCTURE_TYPE_BUFFER_MEMORY_BARRIER,
-        .srcAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT,
-        .dstAccessMask = VK_ACCESS_HOST_READ_BIT,
-        .srcQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED,
-        .dstQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED,
-        .buffer = o->readback.buffer,
-        .size = VK_WHOLE_SIZE,
-    };
-    vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_HOST_BIT, 0, 0, NULL, 1, &to_host, 0,
-                         NULL);
+    record_buffer_barrier(cmd, o->readback.buffer, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_WRITE_BIT,
+                          VK_PIPELINE_STAGE_HOST_BIT, VK_ACCESS_HOST_READ_BIT);
 }
 
 static double tile_device_ms(vk_context *vk, const render_objects *o)
@@ -326,6 +366,8 @@ vkrt_result gpu_trace_render(vk_context *vk, const gpu_scene *scene, const gpu_t
         .mode = gpu_mode(params->mode),
         .traversal = naive ? VKRT_GPU_TRAVERSAL_NAIVE : VKRT_GPU_TRAVERSAL_BVH,
         .heat = gpu_heat(params->heat),
+        .raygen = VKRT_GPU_RAYGEN_CAMERA,
+        .isect = gpu_isect(params->intersector),
     };
     /* Only heatmap reads the heat kind: other modes share one pipeline whatever it is. */
     if (variant.mode != VKRT_GPU_MODE_HEATMAP) variant.heat = VKRT_GPU_HEAT_NODES;
@@ -336,7 +378,7 @@ vkrt_result gpu_trace_render(vk_context *vk, const gpu_scene *scene, const gpu_t
     const uint32_t tile_w = width < TILE_SIZE ? width : TILE_SIZE;
     const uint32_t tile_h = height < TILE_SIZE ? height : TILE_SIZE;
     render_objects o;
-    r = create_render_objects(vk, scene, pipe.set_layout, tile_w, tile_h, naive, &o);
+    r = create_render_objects(vk, scene, pipe.set_layout, tile_w, tile_h, naive ? tile_w * tile_h : 1, 0, &o);
     const uint32_t tiles_x = div_up(width, tile_w), tiles_y = div_up(height, tile_h);
     const uint32_t tiles = tiles_x * tiles_y;
     for (uint32_t t = 0; r == VKRT_OK && t < tiles; t++) {
@@ -364,6 +406,78 @@ vkrt_result gpu_trace_render(vk_context *vk, const gpu_scene *scene, const gpu_t
             float *dst = out_rgba + ((size_t)(push.tile_y + y) * width + push.tile_x) * 4;
             memcpy(dst, src + (size_t)y * push.tile_width * 4, (size_t)push.tile_width * 4 * sizeof(float));
         }
+    }
+    if (r == VKRT_OK && params->progress) params->progress(params->progress_user, "trace", 1.0f);
+    render_objects_destroy(vk, &o);
+    return r;
+}
+
+/* Records one chunk of rays: dispatch(es) over the rays, then a copy of the hits into the
+ * readback buffer. */
+static void record_rays(VkCommandBuffer cmd, const vk_trace_pipeline *pipe, const render_objects *o,
+                        const gpu_scene *scene, vkrt_gpu_push push, bool naive, bool first_chunk)
+{
+    /* The storage image is never written in ray mode, but its descriptor must be in the layout
+     * it names. */
+    if (first_chunk) record_image_to_general(cmd, o, true);
+    /* The shader reads the rays the host (or a staging copy) wrote, and overwrites hits that
+     * the previous chunk's copy read. */
+    VkMemoryBarrier inputs = {
+        .sType = VK_STRUCTURE_TYPE_MEMORY_BARRIER,
+        .srcAccessMask = VK_ACCESS_HOST_WRITE_BIT | VK_ACCESS_TRANSFER_WRITE_BIT | VK_ACCESS_TRANSFER_READ_BIT,
+        .dstAccessMask = VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT,
+    };
+    vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_HOST_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT,
+                         VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT, 0, 1, &inputs, 0, NULL,
+                         0, NULL);
+    /* One invocation per ray, 1D over whole workgroups; VKRT_RAY_CHUNK keeps the count of
+     * groups far below the 65,535 a dispatch allows. */
+    record_dispatches(cmd, pipe, o, scene, push, naive, div_up(push.tile_width, VKRT_TRACE_GROUP_SIZE), 1);
+    /* The copy reads the hits the shader wrote. */
+    record_buffer_barrier(cmd, o->hits.buffer, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_WRITE_BIT,
+                          VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_READ_BIT);
+    VkBufferCopy region = { .size = (VkDeviceSize)push.tile_width * sizeof(vkrt_gpu_hit) };
+    vkCmdCopyBuffer(cmd, o->hits.buffer, o->readback.buffer, 1, &region);
+    /* The host reads the readback buffer after the fence. */
+    record_buffer_barrier(cmd, o->readback.buffer, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_WRITE_BIT,
+                          VK_PIPELINE_STAGE_HOST_BIT, VK_ACCESS_HOST_READ_BIT);
+}
+
+vkrt_result gpu_trace_rays(vk_context *vk, const gpu_scene *scene, const gpu_trace_rays_params *params,
+                           const vkrt_ray *rays, size_t count, vkrt_hit *out_hits)
+{
+    const bool naive = params->traversal == VKRT_TRAVERSAL_NAIVE;
+    /* Mode and heat are unused in ray mode: fixed, so every ray call shares one pipeline. */
+    vk_trace_variant variant = {
+        .mode = VKRT_GPU_MODE_ID,
+        .traversal = naive ? VKRT_GPU_TRAVERSAL_NAIVE : VKRT_GPU_TRAVERSAL_BVH,
+        .heat = VKRT_GPU_HEAT_NODES,
+        .raygen = VKRT_GPU_RAYGEN_BUFFER,
+        .isect = gpu_isect(params->intersector),
+    };
+    vk_trace_pipeline pipe;
+    vkrt_result r = vk_trace_pipeline_get(vk, variant, &pipe);
+    if (r != VKRT_OK) return r;
+    const uint32_t chunk = count < VKRT_RAY_CHUNK ? (uint32_t)count : VKRT_RAY_CHUNK;
+    render_objects o;
+    r = create_render_objects(vk, scene, pipe.set_layout, 1, 1, chunk, chunk, &o);
+    const size_t chunks = (count + chunk - 1) / chunk;
+    for (size_t k = 0; r == VKRT_OK && k < chunks; k++) {
+        if (params->progress && !params->progress(params->progress_user, "trace", (float)k / (float)chunks)) {
+            r = core_fail(vk->core, VKRT_ERROR_CANCELLED, "trace cancelled by the progress callback");
+            break;
+        }
+        const size_t first = k * chunk;
+        const uint32_t n = count - first < chunk ? (uint32_t)(count - first) : chunk;
+        if ((r = vk_buffer_upload(vk, &o.rays, rays + first, (VkDeviceSize)n * sizeof *rays)) != VKRT_OK) break;
+        vkrt_gpu_push push = { .tile_width = n, .tile_height = 1, .tri_end = scene->tri_count,
+                               .tri_total = scene->tri_count, .last_chunk = 1 };
+        VkCommandBuffer cmd;
+        if ((r = vk_commands_begin(vk, &cmd)) != VKRT_OK) break;
+        record_rays(cmd, &pipe, &o, scene, push, naive, k == 0);
+        if ((r = vk_commands_submit_wait(vk, cmd)) != VKRT_OK) break;
+        if ((r = vk_buffer_invalidate(vk, &o.readback)) != VKRT_OK) break;
+        memcpy(out_hits + first, o.readback.mapped, (size_t)n * sizeof *out_hits);
     }
     if (r == VKRT_OK && params->progress) params->progress(params->progress_user, "trace", 1.0f);
     render_objects_destroy(vk, &o);

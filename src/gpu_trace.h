@@ -1,5 +1,6 @@
-/* Drives shaders/trace.comp: scene buffers on the device, and a render as a sequence of tile
- * dispatches (each its own submission, so progress and cancellation happen between them). */
+/* Drives shaders/trace.comp: scene buffers on the device, a render as a sequence of tile
+ * dispatches and arbitrary rays as a sequence of ray chunks (each its own submission, so
+ * progress and cancellation happen between them). */
 #ifndef VKRT_GPU_TRACE_H
 #define VKRT_GPU_TRACE_H
 
@@ -24,6 +25,7 @@ typedef struct gpu_trace_params {
     vkrt_mode mode;            /* resolved */
     vkrt_traversal traversal;  /* resolved */
     vkrt_heat heat;            /* resolved */
+    vkrt_intersector intersector; /* _DEFAULT: watertight */
     vkrt_progress_fn progress; /* may be NULL */
     void *progress_user;
 } gpu_trace_params;
@@ -32,5 +34,16 @@ typedef struct gpu_trace_params {
  * summed device time of the trace dispatches (0 where the queue has no timestamps). */
 vkrt_result gpu_trace_render(vk_context *vk, const gpu_scene *scene, const gpu_trace_params *params,
                              float *out_rgba, double *out_device_ms);
+
+typedef struct gpu_trace_rays_params {
+    vkrt_traversal traversal;     /* resolved */
+    vkrt_intersector intersector; /* _DEFAULT: watertight */
+    vkrt_progress_fn progress;    /* may be NULL; called between submissions */
+    void *progress_user;
+} gpu_trace_rays_params;
+
+/* The closest hit of each ray (see vkrt_trace_rays), VKRT_RAY_CHUNK rays per submission. */
+vkrt_result gpu_trace_rays(vk_context *vk, const gpu_scene *scene, const gpu_trace_rays_params *params,
+                           const vkrt_ray *rays, size_t count, vkrt_hit *out_hits);
 
 #endif

@@ -1,4 +1,5 @@
-/* vkrt_image_save: raw render values -> display colours -> PNG, PPM or PFM on disk.
+/* vkrt_image_save: raw render values -> display colours -> PNG or PPM on disk, or the raw
+ * values themselves -> PFM (exact floats) or Radiance HDR (RGBE, 8-bit shared-exponent).
  * Every format is written to a temporary file beside the target and renamed over it, so a
  * failed or interrupted save never leaves a half-written image under the requested name. */
 #include <errno.h>
@@ -11,7 +12,7 @@
 
 #include "context.h"
 
-typedef enum image_format { FORMAT_UNKNOWN, FORMAT_PNG, FORMAT_PPM, FORMAT_PFM } image_format;
+typedef enum image_format { FORMAT_UNKNOWN, FORMAT_PNG, FORMAT_PPM, FORMAT_PFM, FORMAT_HDR } image_format;
 
 static image_format format_of(const char *path)
 {
@@ -20,6 +21,7 @@ static image_format format_of(const char *path)
     if (strcasecmp(dot, ".png") == 0) return FORMAT_PNG;
     if (strcasecmp(dot, ".ppm") == 0) return FORMAT_PPM;
     if (strcasecmp(dot, ".pfm") == 0) return FORMAT_PFM;
+    if (strcasecmp(dot, ".hdr") == 0) return FORMAT_HDR;
     return FORMAT_UNKNOWN;
 }
 
@@ -115,6 +117,53 @@ static bool write_pfm(FILE *f, const vkrt_image_view *im)
     return true;
 }
 
+/* Greg Ward's shared-exponent pixel (Graphics Gems II, "Real Pixels"): the largest component
+ * keeps 8 bits of mantissa. RGBE has no sign, so negative values (a miss's -1) and NaN become 0;
+ * values beyond 1e38 are clamped so the exponent byte cannot wrap. */
+static void rgbe_from_float(const float *p, uint8_t out[4])
+{
+    float c[3];
+    for (int k = 0; k < 3; k++) c[k] = p[k] > 0.0f ? fminf(p[k], 1e38f) : 0.0f;
+    float v = fmaxf(c[0], fmaxf(c[1], c[2]));
+    if (v < 1e-32f) {
+        memset(out, 0, 4);
+        return;
+    }
+    int e;
+    float scale = frexpf(v, &e) * 256.0f / v;
+    for (int k = 0; k < 3; k++) out[k] = (uint8_t)fminf(c[k] * scale, 255.0f);
+    out[3] = (uint8_t)(e + 128);
+}
+
+/* Radiance HDR, rows top to bottom ("-Y H +X W"). Readers take a scanline of width 8..32767
+ * that starts 2, 2 for run-length encoded, so such rows are always written in that encoding
+ * (literal chunks of at most 128 bytes per component); other widths are flat pixels. */
+static bool write_hdr(FILE *f, const vkrt_image_view *im, uint8_t *row)
+{
+    if (fprintf(f, "#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y %u +X %u\n", im->height, im->width) < 0) return false;
+    const uint32_t w = im->width;
+    const bool rle = w >= 8 && w <= 32767;
+    for (uint32_t y = 0; y < im->height; y++) {
+        for (uint32_t x = 0; x < w; x++) rgbe_from_float(im->rgba + ((size_t)y * w + x) * 4, row + (size_t)x * 4);
+        if (!rle) {
+            if (fwrite(row, 4, w, f) != w) return false;
+            continue;
+        }
+        const uint8_t head[4] = { 2, 2, (uint8_t)(w >> 8), (uint8_t)(w & 0xFF) };
+        if (fwrite(head, 1, 4, f) != 4) return false;
+        for (int k = 0; k < 4; k++) {
+            for (uint32_t x = 0; x < w; x += 128) {
+                uint8_t chunk[129];
+                uint32_t n = w - x < 128 ? w - x : 128;
+                chunk[0] = (uint8_t)n;
+                for (uint32_t i = 0; i < n; i++) chunk[1 + i] = row[(size_t)(x + i) * 4 + (size_t)k];
+                if (fwrite(chunk, 1, n + 1, f) != n + 1) return false;
+            }
+        }
+    }
+    return true;
+}
+
 vkrt_result vkrt_image_save(vkrt_context *ctx, const char *path, const vkrt_image_view *image)
 {
     if (!ctx) return VKRT_ERROR_INVALID_ARGUMENT;
@@ -128,7 +177,7 @@ vkrt_result vkrt_image_save(vkrt_context *ctx, const char *path, const vkrt_imag
                          image->height);
     image_format format = format_of(path);
     if (format == FORMAT_UNKNOWN)
-        return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "%s: unknown image format (use .png, .ppm or .pfm)", path);
+        return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "%s: unknown image format (use .png, .ppm, .pfm or .hdr)", path);
 
     size_t tmp_size = strlen(path) + 16;
     char *tmp = core_alloc(c, tmp_size);
@@ -136,12 +185,14 @@ vkrt_result vkrt_image_save(vkrt_context *ctx, const char *path, const vkrt_imag
     if (!tmp) return core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "out of memory saving %s", path);
     snprintf(tmp, tmp_size, "%s.tmp-vkrt", path);
     if (format != FORMAT_PFM) {
-        rgb = core_alloc_array(c, (size_t)image->width * image->height, 3);
+        /* PNG and PPM: the whole image as 8-bit RGB; HDR: one RGBE row at a time. */
+        rgb = format == FORMAT_HDR ? core_alloc_array(c, image->width, 4)
+                                   : core_alloc_array(c, (size_t)image->width * image->height, 3);
         if (!rgb) {
             core_free(c, tmp);
             return core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "out of memory encoding %s", path);
         }
-        encode_rgb8(image, rgb);
+        if (format != FORMAT_HDR) encode_rgb8(image, rgb);
     }
     vkrt_result r = VKRT_OK;
     FILE *f = fopen(tmp, "wb");
@@ -151,6 +202,8 @@ vkrt_result vkrt_image_save(vkrt_context *ctx, const char *path, const vkrt_imag
         bool ok = true;
         if (format == FORMAT_PFM) {
             ok = write_pfm(f, image);
+        } else if (format == FORMAT_HDR) {
+            ok = write_hdr(f, image, rgb);
         } else if (format == FORMAT_PPM) {
             ok = fprintf(f, "P6\n%u %u\n255\n", image->width, image->height) > 0 &&
                  fwrite(rgb, 3, (size_t)image->width * image->height, f) == (size_t)image->width * image->height;

@@ -7,7 +7,10 @@
 #include <string.h>
 #include <strings.h>
 #include <sys/stat.h>
+#include <time.h>
+#include <unistd.h>
 
+#include "stress.h"
 #include "vkrt.h"
 
 /* Exit codes (documented in README and --help). */
@@ -65,15 +68,30 @@ static int fail(vkrt_context *ctx, vkrt_result r, const char *what)
 }
 
 static const char usage_text[] =
-    "usage: vkrt <command> [options]\n"
+    "usage: vkrt <command> [options]     (`vkrt <command> --help`: its options and examples)\n"
     "\n"
     "commands:\n"
     "  render [FILE]   trace FILE (.obj, .gltf, .glb; the built-in scene when none) to an image\n"
     "  info FILE       load FILE, build its BVH and print statistics\n"
     "  devices         list the Vulkan devices\n"
+    "  stress          numerical-stability suite: both backends and intersectors against the CPU\n"
+    "                  double-precision reference, as a table; exit 1 when a watertight row fails\n"
     "\n"
-    "render options (defaults first):\n"
-    "  -o, --output OUT          render.png; .png, .ppm (8-bit colour) or .pfm (raw floats)\n"
+    "examples:\n"
+    "  vkrt render bunny.obj -o bunny.png --size 512x512\n"
+    "  vkrt info dragon.glb\n"
+    "  vkrt render --help\n"
+    "\n";
+
+static const char render_help[] =
+    "usage: vkrt render [FILE] [options]\n"
+    "Traces one ray per pixel through FILE (.obj, .gltf, .glb; the built-in scene when none) and\n"
+    "writes the image. A progress bar with ETA appears on stderr for work over a second when\n"
+    "stderr is a terminal (not in pipes, not with CI set, not with -q).\n"
+    "\n"
+    "options (defaults first):\n"
+    "  -o, --output OUT          render.png; .png, .ppm (8-bit colour), .pfm (raw floats) or\n"
+    "                            .hdr (raw values, Radiance RGBE)\n"
     "  --mode normal|depth|heatmap|id\n"
     "  --heat nodes|leaves|tris  what heatmap counts per ray\n"
     "  --heat-max N              count at the top of the heat ramp (default: the image maximum)\n"
@@ -81,6 +99,8 @@ static const char usage_text[] =
     "  --bvh sah|midpoint        BVH builder\n"
     "  --max-leaf N              largest SAH leaf (4)\n"
     "  --traverse bvh|naive      naive tests every triangle (identical image, slow)\n"
+    "  --isect watertight|mt     triangle test: watertight (Woop et al. 2013) or Moller-Trumbore\n"
+    "  --precision float|double  double: rays, boxes and triangle tests in double (--backend cpu)\n"
     "  --eye X,Y,Z               0,0,1.5\n"
     "  --target X,Y,Z            0,0,0\n"
     "  --up X,Y,Z                0,1,0\n"
@@ -99,12 +119,76 @@ static const char usage_text[] =
     "  vkrt render bunny.obj -o bunny.png --size 512x512\n"
     "  vkrt render dragon.glb --mode heatmap --heat leaves --bvh midpoint -o heat.png\n"
     "  vkrt render bunny.obj --mode id -o ids.pfm --backend cpu\n"
-    "  vkrt info dragon.glb --bvh sah\n"
+    "  vkrt render bunny.obj --mode depth -o depth.hdr --eye 0.5,0.3,1.2 --fov 30\n"
+    "  vkrt render dragon.glb --repeat 5 --validation -o /tmp/dragon.png   median timings\n"
+    "\n";
+
+static const char info_help[] =
+    "usage: vkrt info FILE [--bvh sah|midpoint] [--max-leaf N] [--no-normalize]\n"
+    "Loads FILE, builds its BVH on the CPU (no Vulkan device needed) and prints triangles, nodes,\n"
+    "leaves, depth, SAH cost, load and build times, bytes, bounds and the leaf-size histogram.\n"
     "\n"
+    "options:\n"
+    "  --bvh sah|midpoint        BVH builder (sah)\n"
+    "  --max-leaf N              largest SAH leaf (4)\n"
+    "  --no-normalize            keep world coordinates (bounds as in the file)\n"
+    "\n"
+    "examples:\n"
+    "  vkrt info bunny.obj\n"
+    "  vkrt info dragon.glb --bvh midpoint           compare the SAH cost with the default\n"
+    "  vkrt info dragon.glb --max-leaf 1 | grep depth\n"
+    "\n";
+
+static const char devices_help[] =
+    "usage: vkrt devices\n"
+    "Lists the Vulkan devices, numbered for `vkrt render --device N`, with type, Vulkan version\n"
+    "and largest storage buffer; [unusable] marks a device without Vulkan 1.2 or compute.\n"
+    "\n"
+    "examples:\n"
+    "  vkrt devices\n"
+    "  vkrt render --device 1 -o render.png           render on the second device listed\n"
+    "  VK_ICD_FILENAMES=/usr/share/vulkan/icd.d/lvp_icd.x86_64.json vkrt devices   lavapipe only\n"
+    "\n";
+
+static const char stress_help[] =
+    "usage: vkrt stress [--quick] [--backend gpu|cpu] [--isect watertight|mt] [options]\n"
+    "Builds meshes in memory (closed meshes with rays at shared edges and vertices, scales 1e-6 to\n"
+    "1e6 and offsets to 1e6, degenerate geometry with both builders, +-0 directions, origins on\n"
+    "surfaces, grazing rays, eyes inside), traces them on each backend with each intersector and\n"
+    "compares every ray with the CPU double-precision reference. Prints a table: case, builder,\n"
+    "backend, intersector, rays, leaks, mismatches, limit, max relative depth error, BVH depth.\n"
+    "Exit 1 when a watertight row has a leak or more mismatches than its limit (mt rows are\n"
+    "reported only).\n"
+    "\n"
+    "options:\n"
+    "  --quick                   the reduced run of the test suite (seconds, not minutes)\n"
+    "  --backend gpu|cpu         only that backend's rows (default: both)\n"
+    "  --isect watertight|mt     only that intersector's rows (default: both)\n"
+    "  --device N, --threads N, --validation, -q, -v   as for render\n"
+    "\n"
+    "examples:\n"
+    "  vkrt stress                                   every case (under a minute on lavapipe)\n"
+    "  vkrt stress --quick --backend gpu             the reduced run, GPU rows only\n"
+    "  vkrt stress --isect watertight | grep FAIL    the watertight rows that fail\n"
+    "\n";
+
+static const char help_footer[] =
     "exit codes: 0 success, 1 internal error, 2 usage, 3 bad input file, 4 device (Vulkan) error,\n"
     "            5 validation-layer messages (with --validation)\n"
     "environment: VKRT_PIPELINE_CACHE (pipeline cache file; default ~/.cache/vkrt/pipelines.bin),\n"
     "             VKRT_VALIDATION=1 (same as --validation)\n";
+
+/* The help of `vkrt COMMAND --help`; the overview for no or an unknown command. */
+static void print_help(FILE *f, const char *command)
+{
+    const char *text = usage_text;
+    if (command && !strcmp(command, "render")) text = render_help;
+    else if (command && !strcmp(command, "info")) text = info_help;
+    else if (command && !strcmp(command, "devices")) text = devices_help;
+    else if (command && !strcmp(command, "stress")) text = stress_help;
+    fputs(text, f);
+    fputs(help_footer, f);
+}
 
 typedef struct options {
     const char *command;
@@ -115,6 +199,7 @@ typedef struct options {
     vkrt_render_desc render;
     float heat_max;
     uint32_t repeat; /* timed renders after one warm-up; 0: a single render */
+    bool quick;      /* stress: the reduced run */
 } options;
 
 static bool parse_vec3(const char *s, float v[3])
@@ -219,6 +304,16 @@ static int parse_args(int argc, char **argv, options *o)
             if (!strcmp(value, "bvh")) o->render.traversal = VKRT_TRAVERSAL_BVH;
             else if (!strcmp(value, "naive")) o->render.traversal = VKRT_TRAVERSAL_NAIVE;
             else return usage_error("unknown traversal '%s' (bvh, naive)", value);
+        } else if (!strcmp(arg, "--isect")) {
+            NEED_VALUE();
+            if (!strcmp(value, "watertight")) o->render.intersector = VKRT_INTERSECTOR_WATERTIGHT;
+            else if (!strcmp(value, "mt")) o->render.intersector = VKRT_INTERSECTOR_MOLLER_TRUMBORE;
+            else return usage_error("unknown intersector '%s' (watertight, mt)", value);
+        } else if (!strcmp(arg, "--precision")) {
+            NEED_VALUE();
+            if (!strcmp(value, "float")) o->render.precision = VKRT_PRECISION_FLOAT;
+            else if (!strcmp(value, "double")) o->render.precision = VKRT_PRECISION_DOUBLE;
+            else return usage_error("unknown precision '%s' (float, double)", value);
         } else if (!strcmp(arg, "--eye")) {
             NEED_VALUE();
             if (!parse_vec3(value, o->render.camera.eye)) return usage_error("bad --eye '%s' (want X,Y,Z)", value);
@@ -248,6 +343,8 @@ static int parse_args(int argc, char **argv, options *o)
         } else if (!strcmp(arg, "--repeat")) {
             NEED_VALUE();
             if (!parse_u32(value, &o->repeat) || !o->repeat || o->repeat > 1000) return usage_error("bad --repeat '%s'", value);
+        } else if (!strcmp(arg, "--quick")) {
+            o->quick = true;
         } else if (!strcmp(arg, "--validation")) {
             o->context.validation = true;
         } else if (!strcmp(arg, "-q") || !strcmp(arg, "--quiet")) {
@@ -255,7 +352,7 @@ static int parse_args(int argc, char **argv, options *o)
         } else if (!strcmp(arg, "-v") || !strcmp(arg, "--verbose")) {
             verbosity = 2;
         } else if (!strcmp(arg, "-h") || !strcmp(arg, "--help")) {
-            fputs(usage_text, stdout);
+            print_help(stdout, o->command);
             exit(EXIT_OK);
         } else if (arg[0] == '-' && arg[1]) {
             return usage_error("unknown option '%s'", arg);
@@ -321,14 +418,71 @@ static bool known_image_extension(const char *path)
 {
     const char *dot = strrchr(path, '.');
     return dot && !strchr(dot, '/') &&
-           (!strcasecmp(dot, ".png") || !strcasecmp(dot, ".ppm") || !strcasecmp(dot, ".pfm"));
+           (!strcasecmp(dot, ".png") || !strcasecmp(dot, ".ppm") || !strcasecmp(dot, ".pfm") ||
+            !strcasecmp(dot, ".hdr"));
+}
+
+/* A progress bar with ETA on stderr, driven by the library's progress callbacks: only where a
+ * person watches (stderr a terminal, CI unset, not -q), and only once a call has run for a
+ * second, so quick commands print nothing extra. One call (scene creation, a render) at a time;
+ * the library reports progress from one thread. */
+#define PROGRESS_DELAY_MS 1000.0 /* shorter work finishes before a bar would be read */
+#define PROGRESS_REDRAW_MS 100.0 /* ten redraws a second keep a slow terminal from lagging */
+#define PROGRESS_WIDTH 30
+
+typedef struct progress_bar {
+    bool enabled;
+    bool shown;          /* a bar is on the line and must be cleared */
+    double start_ms, drawn_ms;
+} progress_bar;
+
+static double now_ms(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec * 1e3 + (double)ts.tv_nsec * 1e-6;
+}
+
+static void progress_begin(progress_bar *b)
+{
+    const char *ci = getenv("CI");
+    b->enabled = verbosity >= 1 && isatty(STDERR_FILENO) && !(ci && ci[0]);
+    b->shown = false;
+    b->start_ms = now_ms();
+    b->drawn_ms = 0.0;
+}
+
+static void progress_end(progress_bar *b)
+{
+    if (b->shown) fputs("\r\033[K", stderr);
+    b->shown = false;
+}
+
+static bool on_progress(void *user, const char *stage, float fraction)
+{
+    progress_bar *b = user;
+    if (!b->enabled) return true;
+    double t = now_ms(), elapsed = t - b->start_ms;
+    if (elapsed < PROGRESS_DELAY_MS || (t - b->drawn_ms < PROGRESS_REDRAW_MS && fraction < 1.0f)) return true;
+    if (!(fraction >= 0.0f)) fraction = 0.0f;
+    if (fraction > 1.0f) fraction = 1.0f;
+    int filled = (int)(fraction * PROGRESS_WIDTH);
+    char eta[32] = "";
+    if (fraction >= 0.01f && fraction < 1.0f)
+        snprintf(eta, sizeof eta, "ETA %.0f s", ceil(elapsed * (1.0 - fraction) / fraction / 1e3));
+    fprintf(stderr, "\r%-6s [%.*s%*s] %3.0f%% %6.1f s  %s\033[K", stage, filled, "##############################",
+            PROGRESS_WIDTH - filled, "", fraction * 100.0f, elapsed / 1e3, eta);
+    fflush(stderr);
+    b->shown = true;
+    b->drawn_ms = t;
+    return true;
 }
 
 static int command_render(options *o)
 {
     /* Refuse an unknown format before spending a render on it. */
     if (!known_image_extension(o->output))
-        return usage_error("cannot tell the image format of '%s' (use .png, .ppm or .pfm)", o->output);
+        return usage_error("cannot tell the image format of '%s' (use .png, .ppm, .pfm or .hdr)", o->output);
     char cache_buf[4200];
     o->context.pipeline_cache_path = pipeline_cache_path(cache_buf, sizeof cache_buf);
     vkrt_context *ctx = NULL;
@@ -339,7 +493,12 @@ static int command_render(options *o)
     vkrt_scene *scene = NULL;
     float *rgba = NULL;
     o->scene.path = o->input;
+    progress_bar bar;
+    o->scene.progress = o->render.progress = on_progress;
+    o->scene.progress_user = o->render.progress_user = &bar;
+    progress_begin(&bar);
     r = vkrt_scene_create(ctx, &o->scene, &scene);
+    progress_end(&bar);
     if (r != VKRT_OK) {
         code = fail(ctx, r, o->input ? NULL : "built-in scene");
         goto done;
@@ -356,7 +515,9 @@ static int command_render(options *o)
     double trace_ms[1001], total_ms[1001];
     uint32_t runs = o->repeat ? o->repeat + 1 : 1;
     for (uint32_t i = 0; i < runs; i++) {
+        progress_begin(&bar);
         r = vkrt_render(ctx, scene, &o->render, rgba, floats, &stats);
+        progress_end(&bar);
         if (r != VKRT_OK) {
             code = fail(ctx, r, "render");
             goto done;
@@ -401,7 +562,12 @@ static int command_info(options *o)
     if (r != VKRT_OK) return fail(NULL, r, "creating the context");
     vkrt_scene *scene = NULL;
     o->scene.path = o->input;
+    progress_bar bar;
+    o->scene.progress = on_progress;
+    o->scene.progress_user = &bar;
+    progress_begin(&bar);
     r = vkrt_scene_create(ctx, &o->scene, &scene);
+    progress_end(&bar);
     if (r != VKRT_OK) {
         int code = fail(ctx, r, NULL);
         vkrt_context_destroy(ctx);
@@ -459,10 +625,31 @@ static int command_devices(options *o)
     return EXIT_OK;
 }
 
+static int command_stress(options *o)
+{
+    if (o->input) return usage_error("stress takes no FILE ('%s')", o->input);
+    char cache_buf[4200];
+    stress_options so = { .context = o->context, .backend = o->context.backend,
+                          .intersector = o->render.intersector, .quick = o->quick };
+    so.context.pipeline_cache_path = pipeline_cache_path(cache_buf, sizeof cache_buf);
+    stress_report report;
+    vkrt_result r = stress_run(&so, &report);
+    if (r != VKRT_OK) {
+        fprintf(stderr, "vkrt: error: %s\n", report.error);
+        return exit_code_for(r);
+    }
+    if (o->context.validation && report.validation_messages) {
+        fprintf(stderr, "vkrt: error: the Vulkan validation layer reported %u message%s\n", report.validation_messages,
+                report.validation_messages == 1 ? "" : "s");
+        return EXIT_VALIDATION;
+    }
+    return report.failed_rows ? EXIT_INTERNAL : EXIT_OK;
+}
+
 int main(int argc, char **argv)
 {
     if (argc < 2 || !strcmp(argv[1], "-h") || !strcmp(argv[1], "--help") || !strcmp(argv[1], "help")) {
-        fputs(usage_text, argc < 2 ? stderr : stdout);
+        print_help(argc < 2 ? stderr : stdout, NULL);
         return argc < 2 ? EXIT_USAGE : EXIT_OK;
     }
     if (!strcmp(argv[1], "--version")) {
@@ -479,5 +666,6 @@ int main(int argc, char **argv)
     if (!strcmp(o.command, "render")) return command_render(&o);
     if (!strcmp(o.command, "info")) return command_info(&o);
     if (!strcmp(o.command, "devices")) return command_devices(&o);
-    return usage_error("unknown command '%s' (render, info, devices)", o.command);
+    if (!strcmp(o.command, "stress")) return command_stress(&o);
+    return usage_error("unknown command '%s' (render, info, devices, stress)", o.command);
 }

@@ -8,6 +8,7 @@
 #include "mesh.h"
 
 #include <errno.h>
+#include <float.h>
 #include <math.h>
 #include <stdio.h>
 #include <string.h>
@@ -262,16 +263,21 @@ void mesh_update_bounds(mesh *m)
     }
 }
 
-void mesh_normalize(mesh *m)
+vkrt_result mesh_normalize(core *c, mesh *m, const char *source)
 {
     mesh_update_bounds(m);
-    if (m->tri_count == 0) return;
+    if (m->tri_count == 0) return VKRT_OK;
     double centre[3], extent = 0.0;
     for (int j = 0; j < 3; j++) {
         centre[j] = 0.5 * ((double)m->bounds_min[j] + (double)m->bounds_max[j]);
         double e = (double)m->bounds_max[j] - (double)m->bounds_min[j];
         if (e > extent) extent = e;
     }
+    /* Finite in double, but the float boxes and ray distances of such a scene overflow. */
+    if (!(extent <= FLT_MAX))
+        return core_fail(c, VKRT_ERROR_INVALID_GEOMETRY,
+                         "%s: coordinates span %.3g, beyond the float range (%.3g): cannot normalise", source,
+                         extent, (double)FLT_MAX);
     double scale = extent > 0.0 ? 1.0 / extent : 1.0;
     size_t corners = (size_t)m->tri_count * 3;
     for (size_t i = 0; i < corners; i++) {
@@ -280,6 +286,7 @@ void mesh_normalize(mesh *m)
     }
     /* A uniform scale and a translation leave unit normals as they are. */
     mesh_update_bounds(m);
+    return VKRT_OK;
 }
 
 vkrt_result mesh_finish(core *c, mesh *m, vkrt_result r)

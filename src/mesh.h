@@ -56,8 +56,10 @@ vkrt_result mesh_finish(core *c, mesh *m, vkrt_result r);
 /* Recomputes bounds_min/max from the corners. */
 void mesh_update_bounds(mesh *m);
 /* Moves the bounding-box centre to the origin and scales the largest extent to 1, so the
- * scene fits [-0.5, 0.5]^3. A scene of zero extent is only centred. */
-void mesh_normalize(mesh *m);
+ * scene fits [-0.5, 0.5]^3. A scene of zero extent is only centred. An extent beyond the
+ * float range (coordinates of 3e38 and -3e38) is VKRT_ERROR_INVALID_GEOMETRY with a message
+ * naming `source` (the file), and the mesh is left as it was. */
+vkrt_result mesh_normalize(core *c, mesh *m, const char *source);
 
 void mesh_destroy(core *c, mesh *m);
 

@@ -7,7 +7,7 @@
 #include "../shaders/vkrt_shared.h"
 #include "shaders_embedded.h"
 
-/* 4 modes x 2 traversals x 3 heat kinds bounds the variants one context can ever create. */
+/* Images: (3 modes + 3 heat kinds) x 2 traversals x 2 intersectors; rays: 2 x 2 more. */
 #define MAX_VARIANTS 32
 
 typedef struct vk_pipelines {
@@ -82,6 +82,7 @@ static vkrt_result create_layouts(vk_context *vk, vk_pipelines *p)
         { VKRT_BINDING_TRIS, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, VK_SHADER_STAGE_COMPUTE_BIT, NULL },
         { VKRT_BINDING_IMAGE, VK_DESCRIPTOR_TYPE_STORAGE_IMAGE, 1, VK_SHADER_STAGE_COMPUTE_BIT, NULL },
         { VKRT_BINDING_HITS, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, VK_SHADER_STAGE_COMPUTE_BIT, NULL },
+        { VKRT_BINDING_RAYS, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, VK_SHADER_STAGE_COMPUTE_BIT, NULL },
     };
     VkDescriptorSetLayoutCreateInfo set_info = {
         .sType = VK_STRUCTURE_TYPE_DESCRIPTOR_SET_LAYOUT_CREATE_INFO,
@@ -151,6 +152,8 @@ vkrt_result vk_trace_pipeline_get(vk_context *vk, vk_trace_variant variant, vk_t
         { VKRT_SPEC_MODE, offsetof(vk_trace_variant, mode), sizeof(uint32_t) },
         { VKRT_SPEC_TRAVERSAL, offsetof(vk_trace_variant, traversal), sizeof(uint32_t) },
         { VKRT_SPEC_HEAT, offsetof(vk_trace_variant, heat), sizeof(uint32_t) },
+        { VKRT_SPEC_RAYGEN, offsetof(vk_trace_variant, raygen), sizeof(uint32_t) },
+        { VKRT_SPEC_ISECT, offsetof(vk_trace_variant, isect), sizeof(uint32_t) },
     };
     VkSpecializationInfo spec = {
         .mapEntryCount = sizeof entries / sizeof entries[0],

@@ -1,6 +1,6 @@
 /* The trace pipeline: GLSL embedded in the library compiled to SPIR-V through glslang's C API
  * (once per context), one descriptor set layout and pipeline layout, and one compute pipeline
- * per specialisation (mode, traversal, heat), created on first use and kept. */
+ * per specialisation (mode, traversal, heat, ray source, intersector), created on first use and kept. */
 #ifndef VKRT_VK_PIPELINE_H
 #define VKRT_VK_PIPELINE_H
 
@@ -13,6 +13,8 @@ typedef struct vk_trace_variant {
     uint32_t mode;       /* VKRT_GPU_MODE_* */
     uint32_t traversal;  /* VKRT_GPU_TRAVERSAL_* */
     uint32_t heat;       /* VKRT_GPU_HEAT_* */
+    uint32_t raygen;     /* VKRT_GPU_RAYGEN_* */
+    uint32_t isect;      /* VKRT_GPU_ISECT_* */
 } vk_trace_variant;
 
 typedef struct vk_trace_pipeline {

@@ -322,7 +322,9 @@ typedef struct vkrt_image_view {
 
 /* Writes an image, the format chosen by the extension: .png (8-bit colour: normals as RGB,
  * depth as grey, ids as distinct colours, heat on a colour ramp), .pfm (the raw 32-bit floats,
- * RGB, for exact comparisons) or .ppm (8-bit, like .png). The file is written to a temporary
+ * RGB, for exact comparisons), .hdr (Radiance RGBE: the raw RGB values with an 8-bit shared
+ * mantissa, negatives such as a miss's -1 stored as 0) or .ppm (8-bit, like .png). Any other
+ * extension returns VKRT_ERROR_INVALID_ARGUMENT. The file is written to a temporary
  * name beside the target and renamed, so a failure never leaves a half-written file. */
 vkrt_result vkrt_image_save(vkrt_context *ctx, const char *path, const vkrt_image_view *image);
 

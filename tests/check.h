@@ -8,6 +8,8 @@
 #include <stdio.h>
 #include <stdlib.h>
 
+#include "vkrt.h"
+
 static int check_failures;
 
 #define CHECK(x)                                                                        \
@@ -60,6 +62,32 @@ static inline int check_exit(void)
 {
     if (check_failures) fprintf(stderr, "%d check(s) failed\n", check_failures);
     return check_failures ? 1 : 0;
+}
+
+/* The two contexts of a GPU test: the GPU (validation on, the pipeline cache meson names) and
+ * the CPU reference. Returns 0 with both set; otherwise the exit code: 77 (skipped) when no
+ * Vulkan device exists outside CI, 1 for any other failure. */
+static inline int check_contexts(vkrt_log_fn log, vkrt_context **gpu, vkrt_context **cpu)
+{
+    vkrt_context_desc desc = { .backend = VKRT_BACKEND_GPU, .log = log, .validation = true };
+    desc.pipeline_cache_path = getenv("VKRT_PIPELINE_CACHE");
+    vkrt_result r = vkrt_context_create(&desc, gpu);
+    if (r == VKRT_ERROR_NO_DEVICE && !getenv("CI")) {
+        fprintf(stderr, "no Vulkan device: skipped (in CI this fails)\n");
+        return 77;
+    }
+    if (r != VKRT_OK) {
+        fprintf(stderr, "cannot create the GPU context: %s\n", vkrt_result_string(r));
+        return 1;
+    }
+    fprintf(stderr, "device: %s\n", vkrt_context_device_name(*gpu));
+    r = vkrt_context_create(&(vkrt_context_desc){ .backend = VKRT_BACKEND_CPU, .log = log }, cpu);
+    if (r != VKRT_OK) {
+        fprintf(stderr, "cannot create the CPU context: %s\n", vkrt_result_string(r));
+        vkrt_context_destroy(*gpu);
+        return 1;
+    }
+    return 0;
 }
 
 /* Path of ../shared/models relative to the source tree; meson passes VKRT_MODELS_DIR. */

@@ -70,6 +70,73 @@ assert any(x >= 0 for x in a) and any(x == -1 for x in a)
 PY
 then ok "GPU and CPU id PFMs agree"; else bad "GPU and CPU id PFMs agree"; fi
 
+# .hdr: Radiance RGBE of the raw values (negatives as 0), equal to the PFM's floats within
+# RGBE's 8-bit shared mantissa; a width of 40 is written run-length encoded.
+expect "render depth .hdr" 0 "$vkrt" render --mode depth --backend cpu -o "$tmp/depth.hdr" --size 40x30
+expect "render depth .pfm" 0 "$vkrt" render --mode depth --backend cpu -o "$tmp/depth.pfm" --size 40x30
+if python3 - "$tmp/depth.hdr" "$tmp/depth.pfm" <<'PY'
+import struct, sys
+d = open(sys.argv[1], "rb").read()
+head = b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 30 +X 40\n"
+assert d.startswith(head), d[:60]
+w, h, pos, rows = 40, 30, len(head), []
+for y in range(h):
+    assert d[pos:pos + 4] == bytes([2, 2, 0, w]), (y, d[pos:pos + 4])
+    pos += 4
+    comps = []
+    for k in range(4):
+        c = b""
+        while len(c) < w:
+            n = d[pos]; pos += 1
+            if n > 128:
+                c += bytes([d[pos]]) * (n - 128); pos += 1
+            else:
+                c += d[pos:pos + n]; pos += n
+        comps.append(c)
+    rows.append(comps)
+assert pos == len(d), (pos, len(d))  # exactly the header and 30 rows of 40 pixels
+p = open(sys.argv[2], "rb").read().split(b"\n", 3)
+pfm = struct.unpack("<%df" % (w * h * 3), p[3][: w * h * 12])
+hits = 0
+for y in range(h):
+    r, g, b, e = rows[y]
+    for x in range(w):
+        want = max(pfm[((h - 1 - y) * w + x) * 3], 0.0)  # PFM rows are bottom to top
+        got = 0.0 if e[x] == 0 else (r[x] + 0.5) * 2.0 ** (e[x] - 136)
+        assert abs(got - want) <= want / 128 + 1e-30, (x, y, got, want)
+        hits += want > 0
+assert 0 < hits < w * h, hits
+PY
+then ok ".hdr header, size and values match the PFM"; else bad ".hdr header, size and values match the PFM"; fi
+
+# --- per-command help -----------------------------------------------------------------
+for cmd in render info devices; do
+  "$vkrt" "$cmd" --help >"$tmp/help" 2>"$tmp/err"
+  got=$?
+  if [ "$got" -eq 0 ] && grep -q "^usage: vkrt $cmd" "$tmp/help" && grep -q '^examples:' "$tmp/help" \
+     && grep -qE "^  vkrt $cmd( |\$)" "$tmp/help" && grep -q '^exit codes' "$tmp/help"; then
+    ok "$cmd --help: usage, examples, exit codes"
+  else bad "$cmd --help (exit $got)"; fi
+done
+"$vkrt" --help >"$tmp/help" 2>&1
+if grep -q 'render --help' "$tmp/help" && ! grep -q -- '--heat-max' "$tmp/help"; then ok "vkrt --help is the overview"; else bad "vkrt --help is the overview"; fi
+
+# --- progress bar: over a second of work, on a terminal only ---------------------------------
+# A single-threaded naive render takes a few seconds; script(1) gives it a terminal.
+slow=("$vkrt" render "$models/meshes/bunny.obj" --backend cpu --threads 1 --traverse naive --size 256x256 -o "$tmp/slow.png")
+if command -v script >/dev/null; then
+  env -u CI script -qec "$(printf '%q ' "${slow[@]}")" /dev/null >"$tmp/tty" 2>&1
+  if grep -q 'ETA' "$tmp/tty" && grep -q '100%' "$tmp/tty" && grep -q "$(printf '\r\033\\[K')vkrt: " "$tmp/tty"; then
+    ok "progress bar with ETA on a terminal, cleared before the summary"
+  else bad "progress bar with ETA on a terminal"; cat -v "$tmp/tty" | tail -c 600; fi
+  CI=1 script -qec "$(printf '%q ' "${slow[@]}")" /dev/null >"$tmp/tty" 2>&1
+  if grep -q 'vkrt: ' "$tmp/tty" && ! grep -q 'ETA' "$tmp/tty"; then ok "no progress bar with CI set"; else bad "no progress bar with CI set"; fi
+else
+  echo "skip progress bar on a terminal: no script(1)"
+fi
+env -u CI "${slow[@]}" >"$tmp/out" 2>"$tmp/err"
+if grep -q 'vkrt: ' "$tmp/err" && ! grep -q "$(printf '\r')" "$tmp/err"; then ok "no progress bar in a pipe"; else bad "no progress bar in a pipe"; fi
+
 # --- info and devices ------------------------------------------------------------------
 "$vkrt" info "$models/meshes/bunny.obj" >"$tmp/info" 2>"$tmp/err"
 if grep -qE '^triangles +3674$' "$tmp/info" && grep -q '^sah cost' "$tmp/info" && grep -q '^leaf sizes' "$tmp/info" \
@@ -114,6 +181,8 @@ printf '# nothing here\nv 0 0 0\nv 1 0 0\n' >"$tmp/empty.obj"
 bad_input "empty mesh" "$tmp/empty.obj" "no triangles|empty"
 printf 'v 0 0 0\nv 1 nan 0\nv 0 1 0\nf 1 2 3\n' >"$tmp/nan.obj"
 bad_input "NaN coordinate" "$tmp/nan.obj" "nan|finite"
+printf 'v 3e38 0 0\nv -3e38 0 0\nv 0 1 0\nf 1 2 3\n' >"$tmp/huge.obj"
+bad_input "coordinates whose extent overflows float" "$tmp/huge.obj" "float range"
 printf 'v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 7\n' >"$tmp/index.obj"
 bad_input "index out of range" "$tmp/index.obj" "index|range"
 printf 'v 0 0 0\nv 1 0 0\nv 0 1 0\nl 1 2 3\np 1\n' >"$tmp/lines.obj"

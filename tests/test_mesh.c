@@ -504,7 +504,7 @@ static void normalize_puts_the_bounds_in_the_unit_cube_with_largest_extent_one(v
     for (size_t i = 0; i < sizeof files / sizeof files[0]; i++) {
         mesh m;
         CHECK(load(files[i], &m) == VKRT_OK);
-        mesh_normalize(&m);
+        CHECK(mesh_normalize(&g_core, &m, files[i]) == VKRT_OK);
         float lo[3] = { INFINITY, INFINITY, INFINITY }, hi[3] = { -INFINITY, -INFINITY, -INFINITY };
         for (size_t v = 0; v < (size_t)m.tri_count * 3; v++)
             for (int j = 0; j < 3; j++) {
@@ -526,8 +526,22 @@ static void normalize_puts_the_bounds_in_the_unit_cube_with_largest_extent_one(v
     const float p[9] = { 3, 3, 3, 3, 3, 3, 3, 3, 3 };
     mesh m = { 0 };
     CHECK(mesh_append_indexed(&g_core, &m, &(mesh_primitive){ .positions = p, .vertex_count = 3 }, "test", "point") == VKRT_OK);
-    mesh_normalize(&m);
+    CHECK(mesh_normalize(&g_core, &m, "test") == VKRT_OK);
     check_corner(&m, 0, 0, 0, 0, 0, 0);
+    mesh_destroy(&g_core, &m);
+}
+
+/* 3e38 and -3e38 are finite floats, but their distance is not: the mesh is refused, by name,
+ * and left as it was. */
+static void normalize_refuses_an_extent_beyond_float(void)
+{
+    const float p[9] = { 3e38f, 0, 0, -3e38f, 0, 0, 0, 1, 0 };
+    mesh m = { 0 };
+    CHECK(mesh_append_indexed(&g_core, &m, &(mesh_primitive){ .positions = p, .vertex_count = 3 }, "huge.obj", "object 0") == VKRT_OK);
+    CHECK(mesh_normalize(&g_core, &m, "huge.obj") == VKRT_ERROR_INVALID_GEOMETRY);
+    CHECK_MSG(strstr(g_core.last_error, "huge.obj") && strstr(g_core.last_error, "float range"), "message \"%s\"",
+              g_core.last_error);
+    CHECK(m.tri_count == 1 && m.positions[0] == 3e38f && m.positions[3] == -3e38f);
     mesh_destroy(&g_core, &m);
 }
 
@@ -737,7 +751,7 @@ static void builtin_scene_is_large_finite_unit_normalled_and_outward(void)
     CHECK_MSG(disagree == 0, "%zu triangles wound against their normals", disagree);
     /* Ground plane first: tilted 30 degrees toward the default camera on +z. */
     check_normal(&m, 0, 0, 0, (float)cos(30 * 3.14159265358979 / 180), 0.5f, 1e-6);
-    mesh_normalize(&m);
+    CHECK(mesh_normalize(&g_core, &m, "built-in scene") == VKRT_OK);
     for (int j = 0; j < 3; j++) CHECK(m.bounds_min[j] >= -0.5f - 1e-6f && m.bounds_max[j] <= 0.5f + 1e-6f);
     mesh_destroy(&g_core, &m);
 }
@@ -825,6 +839,7 @@ int main(void)
     RUN(append_keeps_degenerate_triangles_and_falls_back_to_face_normals);
     RUN(append_rejects_non_finite_coordinates_and_bad_indices_naming_the_culprit);
     RUN(normalize_puts_the_bounds_in_the_unit_cube_with_largest_extent_one);
+    RUN(normalize_refuses_an_extent_beyond_float);
     RUN(meshes_triangle_counts_match_the_manifest);
     RUN(every_obj_and_gltf_of_the_model_set_matches_the_manifest);
     RUN(missing_and_unreadable_files_are_io_errors_naming_the_file);

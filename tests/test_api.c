@@ -1,0 +1,410 @@
+/* The public API under misuse and under memory exhaustion: an allocator that fails its Nth
+ * allocation, for N = 1, 2, ... until the call succeeds, makes every create, render and save
+ * path return VKRT_ERROR_OUT_OF_MEMORY, leave its out pointer NULL and leak nothing; every
+ * misuse answers the exact result code. The GPU part runs where a Vulkan device exists. */
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#include "check.h"
+#include "vkrt.h"
+
+/* ---- an allocator that counts live blocks and fails one chosen allocation ---- */
+
+typedef struct failing_allocator {
+    long calls;   /* allocations since the last arm() */
+    long fail_at; /* 1-based allocation to refuse; 0: none */
+    long live;    /* blocks allocated and not yet freed */
+} failing_allocator;
+
+static failing_allocator fa;
+
+static void *failing_alloc(void *user, size_t size)
+{
+    failing_allocator *f = user;
+    if (++f->calls == f->fail_at) return NULL;
+    void *p = malloc(size);
+    if (p) f->live++;
+    return p;
+}
+
+static void failing_free(void *user, void *pointer)
+{
+    failing_allocator *f = user;
+    f->live--;
+    free(pointer);
+}
+
+static void arm(long n)
+{
+    fa.calls = 0;
+    fa.fail_at = n;
+}
+
+static void disarm(void)
+{
+    fa.fail_at = 0;
+}
+
+static vkrt_context_desc context_desc(vkrt_backend backend)
+{
+    return (vkrt_context_desc){
+        .backend = backend,
+        .cpu_threads = 2,
+        .allocator = { .alloc = failing_alloc, .free = failing_free, .user = &fa },
+    };
+}
+
+/* Creating a context whose Nth allocation fails. */
+static void context_create_oom(vkrt_backend backend)
+{
+    vkrt_context_desc d = context_desc(backend);
+    for (long n = 1; n < 100000; n++) {
+        fa = (failing_allocator){ 0 };
+        arm(n);
+        vkrt_context *ctx = (vkrt_context *)&fa; /* must come back NULL on failure */
+        vkrt_result r = vkrt_context_create(&d, &ctx);
+        disarm();
+        if (r == VKRT_OK) {
+            CHECK(fa.calls >= 1);
+            vkrt_context_destroy(ctx);
+            CHECK_EQ_U64(fa.live, 0);
+            return;
+        }
+        CHECK_MSG(r == VKRT_ERROR_OUT_OF_MEMORY, "context_create, allocation %ld of backend %d failed: %s", n,
+                  (int)backend, vkrt_result_string(r));
+        CHECK(ctx == NULL);
+        CHECK_MSG(fa.live == 0, "context_create, allocation %ld failed: %ld blocks leaked", n, fa.live);
+        if (r != VKRT_ERROR_OUT_OF_MEMORY) return;
+    }
+    CHECK_MSG(0, "context_create never succeeded");
+}
+
+/* An operation on a fresh context; it calls arm(n) right before the call under test and
+ * destroys everything it made. */
+typedef vkrt_result (*oom_op)(vkrt_context *ctx, long n);
+
+static void oom_every_allocation(const char *name, vkrt_backend backend, oom_op op)
+{
+    vkrt_context_desc d = context_desc(backend);
+    for (long n = 1; n < 100000; n++) {
+        fa = (failing_allocator){ 0 };
+        vkrt_context *ctx = NULL;
+        vkrt_result r = vkrt_context_create(&d, &ctx);
+        CHECK_MSG(r == VKRT_OK, "%s: %s", name, vkrt_result_string(r));
+        if (r != VKRT_OK) return;
+        long live_before = fa.live;
+        r = op(ctx, n);
+        disarm();
+        long live_after = fa.live;
+        vkrt_context_destroy(ctx);
+        CHECK_MSG(fa.live == 0, "%s: %ld blocks live after destroying the context", name, fa.live);
+        if (r == VKRT_OK) {
+            CHECK_MSG(n > 1, "%s made no allocation", name);
+            return;
+        }
+        CHECK_MSG(r == VKRT_ERROR_OUT_OF_MEMORY, "%s, allocation %ld failed: %s", name, n, vkrt_result_string(r));
+        CHECK_MSG(live_after == live_before, "%s, allocation %ld failed: %ld blocks leaked", name, n,
+                  live_after - live_before);
+        if (r != VKRT_ERROR_OUT_OF_MEMORY || live_after != live_before) return;
+    }
+    CHECK_MSG(0, "%s never succeeded", name);
+}
+
+static vkrt_result scene_op(vkrt_context *ctx, long n, const vkrt_scene_desc *desc)
+{
+    vkrt_scene *s = (vkrt_scene *)ctx;
+    arm(n);
+    vkrt_result r = vkrt_scene_create(ctx, desc, &s);
+    disarm();
+    if (r != VKRT_OK) CHECK(s == NULL);
+    vkrt_scene_destroy(s);
+    return r;
+}
+
+static vkrt_result op_scene_builtin(vkrt_context *ctx, long n)
+{
+    return scene_op(ctx, n, &(vkrt_scene_desc){ 0 });
+}
+
+static vkrt_result op_scene_obj(vkrt_context *ctx, long n)
+{
+    return scene_op(ctx, n, &(vkrt_scene_desc){ .path = VKRT_TEST_DATA_DIR "/groups.obj" });
+}
+
+static vkrt_result op_scene_gltf(vkrt_context *ctx, long n)
+{
+    return scene_op(ctx, n, &(vkrt_scene_desc){ .path = VKRT_TEST_DATA_DIR "/instanced.gltf" });
+}
+
+/* Two in-memory meshes: an indexed quad with a transform, and a non-indexed triangle. */
+static const float quad_positions[] = { 0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0 };
+static const uint32_t quad_indices[] = { 0, 1, 2, 0, 2, 3 };
+static const float shift[16] = { 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 2, 1 };
+static const float tri_positions[] = { 0, 0, 1, 1, 0, 1, 0, 1, 1 };
+
+static vkrt_result op_scene_memory(vkrt_context *ctx, long n)
+{
+    vkrt_mesh_desc meshes[2] = {
+        { .positions = quad_positions, .vertex_count = 4, .indices = quad_indices, .index_count = 6, .transform = shift },
+        { .positions = tri_positions, .vertex_count = 3 },
+    };
+    return scene_op(ctx, n, &(vkrt_scene_desc){ .meshes = meshes, .mesh_count = 2 });
+}
+
+static vkrt_result render_op(vkrt_context *ctx, long n, vkrt_mode mode, const char *save_path)
+{
+    vkrt_scene *s = NULL;
+    vkrt_result r = vkrt_scene_create(ctx, &(vkrt_scene_desc){ 0 }, &s);
+    CHECK_MSG(r == VKRT_OK, "%s", vkrt_context_last_error(ctx));
+    if (r != VKRT_OK) return VKRT_OK; /* reported; ends the loop */
+    float rgba[24 * 16 * 4];
+    vkrt_render_desc d = { .width = 24, .height = 16, .mode = mode };
+    if (save_path) {
+        r = vkrt_render(ctx, s, &d, rgba, sizeof rgba / sizeof rgba[0], NULL);
+        CHECK(r == VKRT_OK);
+        arm(n);
+        r = vkrt_image_save(ctx, save_path, &(vkrt_image_view){ .rgba = rgba, .width = 24, .height = 16, .mode = mode });
+    } else {
+        arm(n);
+        r = vkrt_render(ctx, s, &d, rgba, sizeof rgba / sizeof rgba[0], NULL);
+    }
+    disarm();
+    vkrt_scene_destroy(s);
+    return r;
+}
+
+static vkrt_result op_render(vkrt_context *ctx, long n)
+{
+    return render_op(ctx, n, VKRT_MODE_NORMAL, NULL);
+}
+
+static char save_dir[] = "/tmp/vkrt_test_api_XXXXXX";
+
+/* Saves a render as `name`; a failed save leaves no file. */
+static vkrt_result save_op(vkrt_context *ctx, long n, const char *name, vkrt_mode mode)
+{
+    char path[64];
+    snprintf(path, sizeof path, "%s/%s", save_dir, name);
+    vkrt_result r = render_op(ctx, n, mode, path);
+    CHECK_MSG(r == VKRT_OK ? access(path, F_OK) == 0 : access(path, F_OK) != 0, "%s after %s", name,
+              vkrt_result_string(r));
+    remove(path);
+    return r;
+}
+
+static vkrt_result op_save_png(vkrt_context *ctx, long n)
+{
+    return save_op(ctx, n, "oom.png", VKRT_MODE_DEPTH);
+}
+
+static vkrt_result op_save_pfm(vkrt_context *ctx, long n)
+{
+    return save_op(ctx, n, "oom.pfm", VKRT_MODE_ID);
+}
+
+static vkrt_result op_save_hdr(vkrt_context *ctx, long n)
+{
+    return save_op(ctx, n, "oom.hdr", VKRT_MODE_DEPTH);
+}
+
+static void out_of_memory_at_every_cpu_allocation(void)
+{
+    context_create_oom(VKRT_BACKEND_CPU);
+    oom_every_allocation("scene_create (built-in)", VKRT_BACKEND_CPU, op_scene_builtin);
+    oom_every_allocation("scene_create (groups.obj)", VKRT_BACKEND_CPU, op_scene_obj);
+    oom_every_allocation("scene_create (instanced.gltf)", VKRT_BACKEND_CPU, op_scene_gltf);
+    oom_every_allocation("scene_create (in-memory meshes)", VKRT_BACKEND_CPU, op_scene_memory);
+    oom_every_allocation("render (CPU)", VKRT_BACKEND_CPU, op_render);
+    oom_every_allocation("image_save (.png)", VKRT_BACKEND_CPU, op_save_png);
+    oom_every_allocation("image_save (.pfm)", VKRT_BACKEND_CPU, op_save_pfm);
+    oom_every_allocation("image_save (.hdr)", VKRT_BACKEND_CPU, op_save_hdr);
+}
+
+static void out_of_memory_at_every_gpu_allocation(void)
+{
+    context_create_oom(VKRT_BACKEND_GPU);
+    oom_every_allocation("scene_create (built-in, GPU)", VKRT_BACKEND_GPU, op_scene_builtin);
+    oom_every_allocation("render (GPU)", VKRT_BACKEND_GPU, op_render);
+}
+
+/* ---- misuse ---- */
+
+static void result_strings_name_every_code(void)
+{
+#define CHECK_RESULT_STRING_(name, message) \
+    CHECK(strcmp(vkrt_result_string(name), #name ": " message) == 0);
+    VKRT_RESULT_LIST(CHECK_RESULT_STRING_)
+#undef CHECK_RESULT_STRING_
+    CHECK(vkrt_result_string(VKRT_RESULT_COUNT_) != NULL);
+    CHECK(vkrt_result_string((vkrt_result)-1) != NULL);
+    CHECK(strstr(vkrt_result_string((vkrt_result)12345), "UNKNOWN") != NULL);
+}
+
+static void version_matches_header(void)
+{
+    CHECK_EQ_U64(vkrt_version(), VKRT_VERSION);
+    CHECK_EQ_U64(VKRT_VERSION >> 22, VKRT_VERSION_MAJOR);
+    CHECK_EQ_U64((VKRT_VERSION >> 12) & 0x3ff, VKRT_VERSION_MINOR);
+    CHECK_EQ_U64(VKRT_VERSION & 0xfff, VKRT_VERSION_PATCH);
+}
+
+static void context_misuse_returns_invalid_argument(void)
+{
+    CHECK(vkrt_context_create(&(vkrt_context_desc){ .backend = VKRT_BACKEND_CPU }, NULL) == VKRT_ERROR_INVALID_ARGUMENT);
+    vkrt_context *ctx = (vkrt_context *)&fa;
+    CHECK(vkrt_context_create(&(vkrt_context_desc){ .backend = (vkrt_backend)99 }, &ctx) == VKRT_ERROR_INVALID_ARGUMENT);
+    CHECK(ctx == NULL);
+    ctx = (vkrt_context *)&fa;
+    vkrt_context_desc half = { .backend = VKRT_BACKEND_CPU, .allocator = { .alloc = failing_alloc } };
+    CHECK(vkrt_context_create(&half, &ctx) == VKRT_ERROR_INVALID_ARGUMENT);
+    CHECK(ctx == NULL);
+    /* NULL desc means every default, like (desc){ 0 }: documented in vkrt.h's conventions. */
+    vkrt_context_destroy(NULL);
+    CHECK(vkrt_context_last_error(NULL) != NULL);
+    CHECK_EQ_U64(vkrt_context_validation_messages(NULL), 0);
+    CHECK(vkrt_context_device_name(NULL) != NULL);
+    CHECK(vkrt_devices_list(NULL, NULL, NULL) == VKRT_ERROR_INVALID_ARGUMENT);
+}
+
+static vkrt_result make_memory_scene(vkrt_context *ctx, const vkrt_mesh_desc *m, vkrt_scene **out)
+{
+    *out = (vkrt_scene *)ctx;
+    return vkrt_scene_create(ctx, &(vkrt_scene_desc){ .meshes = m, .mesh_count = 1 }, out);
+}
+
+static void scene_misuse_returns_the_exact_code(void)
+{
+    vkrt_context *ctx = NULL;
+    CHECK(vkrt_context_create(&(vkrt_context_desc){ .backend = VKRT_BACKEND_CPU }, &ctx) == VKRT_OK);
+    if (!ctx) return;
+    vkrt_scene *s = (vkrt_scene *)ctx;
+    CHECK(vkrt_scene_create(NULL, &(vkrt_scene_desc){ 0 }, &s) == VKRT_ERROR_INVALID_ARGUMENT);
+    CHECK(vkrt_scene_create(ctx, &(vkrt_scene_desc){ 0 }, NULL) == VKRT_ERROR_INVALID_ARGUMENT);
+    CHECK(strstr(vkrt_context_last_error(ctx), "out_scene") != NULL);
+    s = (vkrt_scene *)ctx;
+    CHECK(vkrt_scene_create(ctx, &(vkrt_scene_desc){ .builder = (vkrt_bvh_builder)7 }, &s) == VKRT_ERROR_INVALID_ARGUMENT);
+    CHECK(s == NULL);
+    CHECK(strstr(vkrt_context_last_error(ctx), "builder") != NULL);
+    CHECK(vkrt_scene_create(ctx, &(vkrt_scene_desc){ .mesh_count = 1 }, &s) == VKRT_ERROR_INVALID_ARGUMENT);
+    CHECK(vkrt_scene_create(ctx, &(vkrt_scene_desc){ .path = "/nonexistent/vkrt.obj" }, &s) == VKRT_ERROR_IO);
+    CHECK(s == NULL);
+
+    float nan_positions[] = { 0, 0, 0, 1, 0, 0, 0, NAN, 0 };
+    float inf_positions[] = { 0, 0, 0, INFINITY, 0, 0, 0, 1, 0 };
+    float nan_normals[] = { 0, 0, 1, 0, 0, 1, NAN, 0, 1 };
+    float nan_transform[16] = { 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, NAN, 0, 0, 1 };
+    uint32_t bad_index[] = { 0, 1, 3 };
+    uint32_t two_indices[] = { 0, 1 };
+    CHECK(make_memory_scene(ctx, &(vkrt_mesh_desc){ .positions = nan_positions, .vertex_count = 3 }, &s) ==
+          VKRT_ERROR_INVALID_GEOMETRY);
+    CHECK(s == NULL);
+    CHECK(strstr(vkrt_context_last_error(ctx), "meshes[0]") != NULL);
+    CHECK(make_memory_scene(ctx, &(vkrt_mesh_desc){ .positions = inf_positions, .vertex_count = 3 }, &s) ==
+          VKRT_ERROR_INVALID_GEOMETRY);
+    CHECK(make_memory_scene(ctx, &(vkrt_mesh_desc){ .positions = tri_positions, .vertex_count = 3, .normals = nan_normals }, &s) ==
+          VKRT_ERROR_INVALID_GEOMETRY);
+    CHECK(make_memory_scene(ctx, &(vkrt_mesh_desc){ .positions = tri_positions, .vertex_count = 3, .transform = nan_transform }, &s) ==
+          VKRT_ERROR_INVALID_GEOMETRY);
+    CHECK(make_memory_scene(ctx, &(vkrt_mesh_desc){ .positions = tri_positions, .vertex_count = 3, .indices = bad_index, .index_count = 3 }, &s) ==
+          VKRT_ERROR_INVALID_GEOMETRY);
+    CHECK(make_memory_scene(ctx, &(vkrt_mesh_desc){ .positions = tri_positions, .vertex_count = 3, .indices = two_indices, .index_count = 2 }, &s) ==
+          VKRT_ERROR_INVALID_GEOMETRY);
+    CHECK(make_memory_scene(ctx, &(vkrt_mesh_desc){ .positions = NULL, .vertex_count = 3 }, &s) == VKRT_ERROR_INVALID_ARGUMENT);
+    CHECK(make_memory_scene(ctx, &(vkrt_mesh_desc){ .positions = tri_positions, .vertex_count = 0 }, &s) == VKRT_ERROR_EMPTY_SCENE);
+    CHECK(s == NULL);
+    CHECK(make_memory_scene(ctx, &(vkrt_mesh_desc){ .positions = tri_positions, .vertex_count = 3 }, &s) == VKRT_OK);
+    vkrt_scene_stats st;
+    CHECK(vkrt_scene_stats_get(s, NULL) == VKRT_ERROR_INVALID_ARGUMENT);
+    CHECK(vkrt_scene_stats_get(NULL, &st) == VKRT_ERROR_INVALID_ARGUMENT);
+    CHECK(vkrt_scene_stats_get(s, &st) == VKRT_OK && st.triangles == 1);
+    vkrt_scene_destroy(s);
+    vkrt_scene_destroy(NULL);
+    vkrt_context_destroy(ctx);
+}
+
+static void render_and_save_misuse_return_invalid_argument(void)
+{
+    vkrt_context *ctx = NULL, *other = NULL;
+    CHECK(vkrt_context_create(&(vkrt_context_desc){ .backend = VKRT_BACKEND_CPU }, &ctx) == VKRT_OK);
+    CHECK(vkrt_context_create(&(vkrt_context_desc){ .backend = VKRT_BACKEND_CPU }, &other) == VKRT_OK);
+    vkrt_scene *s = NULL;
+    if (ctx) CHECK(vkrt_scene_create(ctx, NULL, &s) == VKRT_OK); /* NULL desc: the built-in scene */
+    if (!s) goto done;
+    float rgba[8 * 8 * 4];
+    const size_t n = sizeof rgba / sizeof rgba[0];
+    const vkrt_render_desc ok = { .width = 8, .height = 8 };
+    CHECK(vkrt_render(ctx, s, &ok, rgba, n, NULL) == VKRT_OK);
+    CHECK(vkrt_render(NULL, s, &ok, rgba, n, NULL) == VKRT_ERROR_INVALID_ARGUMENT);
+    CHECK(vkrt_render(ctx, NULL, &ok, rgba, n, NULL) == VKRT_ERROR_INVALID_ARGUMENT);
+    CHECK(vkrt_render(other, s, &ok, rgba, n, NULL) == VKRT_ERROR_INVALID_ARGUMENT);
+    CHECK(vkrt_render(ctx, s, &ok, NULL, n, NULL) == VKRT_ERROR_INVALID_ARGUMENT);
+    CHECK(vkrt_render(ctx, s, &ok, rgba, n - 1, NULL) == VKRT_ERROR_INVALID_ARGUMENT);
+    CHECK(vkrt_render(ctx, s, NULL, rgba, n, NULL) == VKRT_ERROR_INVALID_ARGUMENT); /* default 1024x1024 > n */
+    vkrt_render_desc d = ok;
+    d.mode = (vkrt_mode)99;
+    CHECK(vkrt_render(ctx, s, &d, rgba, n, NULL) == VKRT_ERROR_INVALID_ARGUMENT);
+    CHECK(strstr(vkrt_context_last_error(ctx), "mode") != NULL);
+    d = ok;
+    d.traversal = (vkrt_traversal)99;
+    CHECK(vkrt_render(ctx, s, &d, rgba, n, NULL) == VKRT_ERROR_INVALID_ARGUMENT);
+    d = ok;
+    d.heat = (vkrt_heat)99;
+    CHECK(vkrt_render(ctx, s, &d, rgba, n, NULL) == VKRT_ERROR_INVALID_ARGUMENT);
+    d = ok;
+    d.camera.fov_y_degrees = 180;
+    CHECK(vkrt_render(ctx, s, &d, rgba, n, NULL) == VKRT_ERROR_INVALID_ARGUMENT);
+    d = ok;
+    d.camera.eye[0] = NAN;
+    CHECK(vkrt_render(ctx, s, &d, rgba, n, NULL) == VKRT_ERROR_INVALID_ARGUMENT);
+    d = ok;
+    d.width = 100000;
+    CHECK(vkrt_render(ctx, s, &d, rgba, n, NULL) == VKRT_ERROR_INVALID_ARGUMENT);
+
+    char path[64];
+    snprintf(path, sizeof path, "%s/misuse.png", save_dir);
+    vkrt_image_view view = { .rgba = rgba, .width = 8, .height = 8 };
+    CHECK(vkrt_image_save(NULL, path, &view) == VKRT_ERROR_INVALID_ARGUMENT);
+    CHECK(vkrt_image_save(ctx, NULL, &view) == VKRT_ERROR_INVALID_ARGUMENT);
+    CHECK(vkrt_image_save(ctx, path, NULL) == VKRT_ERROR_INVALID_ARGUMENT);
+    CHECK(vkrt_image_save(ctx, path, &(vkrt_image_view){ .width = 8, .height = 8 }) == VKRT_ERROR_INVALID_ARGUMENT);
+    CHECK(vkrt_image_save(ctx, path, &(vkrt_image_view){ .rgba = rgba, .width = 0, .height = 8 }) == VKRT_ERROR_INVALID_ARGUMENT);
+    snprintf(path, sizeof path, "%s/misuse.bmp", save_dir);
+    CHECK(vkrt_image_save(ctx, path, &view) == VKRT_ERROR_INVALID_ARGUMENT);
+    CHECK(vkrt_image_save(ctx, "/nonexistent/dir/misuse.png", &view) == VKRT_ERROR_IO);
+    CHECK(access(path, F_OK) != 0);
+done:
+    vkrt_scene_destroy(s);
+    vkrt_context_destroy(other);
+    vkrt_context_destroy(ctx);
+}
+
+static bool gpu_available(void)
+{
+    vkrt_context *ctx = NULL;
+    vkrt_result r = vkrt_context_create(&(vkrt_context_desc){ 0 }, &ctx);
+    vkrt_context_destroy(ctx);
+    if (r == VKRT_OK) return true;
+    CHECK_MSG(r == VKRT_ERROR_NO_DEVICE, "GPU context: %s", vkrt_result_string(r));
+    /* In CI a missing device is a failure, so a broken lavapipe cannot pass as green. */
+    if (getenv("CI")) CHECK_MSG(0, "no Vulkan device, and CI is set");
+    else fprintf(stderr, "skip the GPU backend: no Vulkan device\n");
+    return false;
+}
+
+int main(void)
+{
+    if (!mkdtemp(save_dir)) {
+        perror("mkdtemp");
+        return 1;
+    }
+    RUN(result_strings_name_every_code);
+    RUN(version_matches_header);
+    RUN(context_misuse_returns_invalid_argument);
+    RUN(scene_misuse_returns_the_exact_code);
+    RUN(render_and_save_misuse_return_invalid_argument);
+    RUN(out_of_memory_at_every_cpu_allocation);
+    if (gpu_available()) RUN(out_of_memory_at_every_gpu_allocation);
+    rmdir(save_dir);
+    return check_exit();
+}
