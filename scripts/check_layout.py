@@ -34,8 +34,10 @@ def c_layouts(header):
 def spirv_layouts(glslang, spirv_dis, shader):
     with tempfile.TemporaryDirectory() as tmp:
         spv = os.path.join(tmp, "layout.spv")
-        subprocess.run([glslang, "-V", "--target-env", "vulkan1.2", "-o", spv, shader], check=True,
-                       stdout=subprocess.DEVNULL)
+        compiled = subprocess.run([glslang, "-V", "--target-env", "vulkan1.2", "-o", spv, shader],
+                                  capture_output=True, text=True)
+        if compiled.returncode != 0:
+            sys.exit(f"{shader} does not compile:\n{compiled.stdout}{compiled.stderr}")
         dis = subprocess.run([spirv_dis, "--raw-id", spv], check=True, capture_output=True, text=True).stdout
     names = dict(re.findall(r'OpName (%\d+) "(\w+)"', dis))
     offsets, strides, element = {}, {}, {}

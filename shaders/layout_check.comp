@@ -11,6 +11,8 @@ layout(std430, set = 0, binding = 1) readonly buffer Tris { vkrt_gpu_tri tris[];
 layout(std430, set = 0, binding = 2) readonly buffer Hits { vkrt_gpu_hit hits[]; };
 layout(std430, set = 0, binding = 3) writeonly buffer Words { uint words[]; };
 layout(std430, set = 0, binding = 4) readonly buffer Rays { vkrt_gpu_ray rays[]; };
+layout(std430, set = 0, binding = 5) readonly buffer Resume { vkrt_gpu_resume states[]; };
+layout(std430, set = 0, binding = 6) readonly buffer ResumeStack { vkrt_gpu_stack_entry entries[]; };
 layout(push_constant) uniform PushBlock { vkrt_gpu_push p; };
 
 uint k = 0;
@@ -31,5 +33,11 @@ void main()
     put(r.origin); put(r.tmin); put(r.dir); put(r.tmax);
     put(p.eye); put(p.width); put(p.right); put(p.height); put(p.up); put(p.tile_x); put(p.forward);
     put(p.tile_y); put(p.tile_width); put(p.tile_height); put(p.tri_first); put(p.tri_end); put(p.tri_total);
-    put(p.last_chunk); put(p.pad0); put(p.pad1);
+    put(p.last_chunk); put(p.resume); put(p.pad1);
+    vkrt_gpu_resume s = states[1];
+    put(s.unfinished); put(s.node); put(s.tri_next); put(s.tri_end); put(s.sp); put(s.t); put(s.u); put(s.v);
+    put(s.tri); put(s.prim); put(s.heat_nodes); put(s.heat_leaves); put(s.heat_tris); put(s.pad0); put(s.pad1);
+    put(s.pad2);
+    vkrt_gpu_stack_entry e = entries[1];
+    put(e.node); put(e.tnear);
 }

@@ -1,6 +1,7 @@
 /* One primary ray per pixel of a tile (RAYGEN camera), or one ray of the ray buffer per
- * invocation (RAYGEN buffer, vkrt_trace_rays). The mode, traversal, heat kind, ray source and
- * intersector are specialization constants, so each pipeline keeps only the code it uses.
+ * invocation (RAYGEN buffer, vkrt_trace_rays). The mode, traversal, heat kind, ray source,
+ * intersector and loop budget are specialization constants, so each pipeline keeps only the
+ * code it uses.
  * Mirrors trace_pixel(), trace_one_ray() and their callees in src/cpu_trace.c and
  * src/cpu_trace_real.h. */
 #version 460
@@ -15,6 +16,7 @@ layout(constant_id = VKRT_SPEC_TRAVERSAL) const uint TRAVERSAL = VKRT_GPU_TRAVER
 layout(constant_id = VKRT_SPEC_HEAT) const uint HEAT = VKRT_GPU_HEAT_NODES;
 layout(constant_id = VKRT_SPEC_RAYGEN) const uint RAYGEN = VKRT_GPU_RAYGEN_CAMERA;
 layout(constant_id = VKRT_SPEC_ISECT) const uint ISECT = VKRT_GPU_ISECT_WATERTIGHT;
+layout(constant_id = VKRT_SPEC_BUDGET) const uint BUDGET = 0u;
 
 layout(set = 0, binding = VKRT_BINDING_NODES, std430) readonly buffer Nodes {
     vkrt_gpu_node nodes[];
@@ -32,6 +34,17 @@ layout(set = 0, binding = VKRT_BINDING_HITS, std430) buffer Hits {
 /* Ray mode: the rays of this submission. */
 layout(set = 0, binding = VKRT_BINDING_RAYS, std430) readonly buffer Rays {
     vkrt_gpu_ray rays[];
+};
+/* BVH traversal with a budget: the state of each traversal that stopped at it, and how many
+ * stopped in this dispatch (the host repeats resume dispatches until none did). */
+layout(set = 0, binding = VKRT_BINDING_RESUME, std430) buffer Resume {
+    vkrt_gpu_resume states[];
+};
+layout(set = 0, binding = VKRT_BINDING_RESUME_STACK, std430) buffer ResumeStack {
+    vkrt_gpu_stack_entry saved_stack[];
+};
+layout(set = 0, binding = VKRT_BINDING_UNFINISHED, std430) buffer Unfinished {
+    uint unfinished;
 };
 layout(push_constant, std430) uniform Push {
     vkrt_gpu_push p;
@@ -66,64 +79,130 @@ void test_triangle(ray r, uint index, inout hit best)
     }
 }
 
-void trace_bvh(ray r, inout hit best, inout heat_counts heat)
+/* Marks a BVH traversal complete, so resume dispatches pass it by. */
+void mark_finished(uint slot)
+{
+    if (BUDGET != 0u) states[slot].unfinished = 0u;
+}
+
+#define NO_NODE 0xFFFFFFFFu
+
+/* Front-to-back BVH traversal as one flat loop: each iteration pops a stack entry that turns
+ * out too far (it can no longer improve the closest hit), visits an interior node, or tests
+ * one triangle of the current leaf (its first together with the step that reached the leaf). One loop
+ * and no nested one, so a SIMD group iterates as often as its busiest lane and the budget
+ * bounds exactly what lavapipe counts. With BUDGET != 0 it stops after BUDGET iterations,
+ * saves its state in `slot` and returns false; a resume dispatch (p.resume) reloads the state
+ * and goes on. Returns true when done (the slot then says so). Mirrors trace_bvh_f in
+ * src/cpu_trace_real.h: same visiting order, pruning, ties and heat counts. */
+bool trace_bvh(ray r, uint slot, inout hit best, inout heat_counts heat)
 {
     uint stack_node[VKRT_TRAVERSAL_STACK_SIZE];
     float stack_tnear[VKRT_TRAVERSAL_STACK_SIZE];
-    uint sp = 0u;
-    float tnear;
-    if (!intersect_box(r, nodes[0].bmin, nodes[0].bmax, best.t, tnear)) return;
-    heat.nodes++;
-    if (nodes[0].tri_count != 0u) heat.leaves++;
-    uint node = 0u;
+    uint sp = 0u, node = NO_NODE, tri_next = 0u, tri_end = 0u;
+    if (BUDGET != 0u && p.resume != 0u) {
+        vkrt_gpu_resume s = states[slot];
+        node = s.node;
+        tri_next = s.tri_next;
+        tri_end = s.tri_end;
+        sp = s.sp;
+        best = hit(s.t, s.u, s.v, s.tri, s.prim);
+        heat = heat_counts(s.heat_nodes, s.heat_leaves, s.heat_tris);
+        for (uint i = 0u; i < sp; i++) {
+            vkrt_gpu_stack_entry e = saved_stack[slot * VKRT_TRAVERSAL_STACK_SIZE + i];
+            stack_node[i] = e.node;
+            stack_tnear[i] = e.tnear;
+        }
+    } else {
+        float tnear;
+        if (!intersect_box(r, nodes[0].bmin, nodes[0].bmax, best.t, tnear)) {
+            mark_finished(slot);
+            return true;
+        }
+        heat.nodes++;
+        if (nodes[0].tri_count != 0u) heat.leaves++;
+        node = 0u;
+    }
+    uint steps = 0u;
+    bool suspended = false;
     for (;;) {
-        vkrt_gpu_node n = nodes[node];
-        bool descend = false;
-        if (n.tri_count != 0u) {
-            for (uint i = n.left_first; i < n.left_first + n.tri_count; i++) {
-                heat.tris++;
-                test_triangle(r, i, best);
+        if (BUDGET != 0u) {
+            if (steps == BUDGET) {
+                suspended = true;
+                break;
             }
-        } else {
-            uint left = n.left_first, right = left + 1u;
-            vkrt_gpu_node ln = nodes[left], rn = nodes[right];
-            float tl, tr;
-            bool hit_l = intersect_box(r, ln.bmin, ln.bmax, best.t, tl);
-            bool hit_r = intersect_box(r, rn.bmin, rn.bmax, best.t, tr);
-            if (hit_l) {
-                heat.nodes++;
-                if (ln.tri_count != 0u) heat.leaves++;
-            }
-            if (hit_r) {
-                heat.nodes++;
-                if (rn.tri_count != 0u) heat.leaves++;
-            }
-            if (hit_l && hit_r) {
-                uint far_node = tr < tl ? left : right;
-                float far_t = tr < tl ? tl : tr;
-                node = tr < tl ? right : left;
-                /* Never full for a BVH within VKRT_MAX_BVH_DEPTH: one entry per level above. */
-                if (sp < VKRT_TRAVERSAL_STACK_SIZE) {
-                    stack_node[sp] = far_node;
-                    stack_tnear[sp] = far_t;
-                    sp++;
+            steps++;
+        }
+        if (node == NO_NODE && tri_next == tri_end) {
+            if (sp == 0u) break;
+            sp--;
+            /* A pushed box that starts beyond the closest hit found since cannot improve it. */
+            if (stack_tnear[sp] > best.t) continue;
+            node = stack_node[sp];
+        }
+        if (node != NO_NODE) {
+            vkrt_gpu_node n = nodes[node];
+            node = NO_NODE;
+            if (n.tri_count != 0u) {
+                tri_next = n.left_first;
+                tri_end = n.left_first + n.tri_count;
+            } else {
+                uint left = n.left_first, right = left + 1u;
+                vkrt_gpu_node ln = nodes[left], rn = nodes[right];
+                float tl, tr;
+                bool hit_l = intersect_box(r, ln.bmin, ln.bmax, best.t, tl);
+                bool hit_r = intersect_box(r, rn.bmin, rn.bmax, best.t, tr);
+                if (hit_l) {
+                    heat.nodes++;
+                    if (ln.tri_count != 0u) heat.leaves++;
                 }
-                descend = true;
-            } else if (hit_l) {
-                node = left;
-                descend = true;
-            } else if (hit_r) {
-                node = right;
-                descend = true;
+                if (hit_r) {
+                    heat.nodes++;
+                    if (rn.tri_count != 0u) heat.leaves++;
+                }
+                bool near_r = hit_r && (!hit_l || tr < tl);
+                if (hit_l && hit_r) {
+                    /* Never full for a BVH within VKRT_MAX_BVH_DEPTH: one entry per level above. */
+                    if (sp < VKRT_TRAVERSAL_STACK_SIZE) {
+                        stack_node[sp] = near_r ? left : right;
+                        stack_tnear[sp] = near_r ? tl : tr;
+                        sp++;
+                    }
+                }
+                if (!hit_l && !hit_r) continue;
+                /* A leaf child's first triangle is tested in this iteration (its node is
+                 * loaded already); an interior child is the next iteration's node step. */
+                vkrt_gpu_node child = near_r ? rn : ln;
+                if (child.tri_count == 0u) {
+                    node = near_r ? right : left;
+                    continue;
+                }
+                tri_next = child.left_first;
+                tri_end = child.left_first + child.tri_count;
             }
         }
-        if (descend) continue;
-        /* A pushed box that starts beyond the closest hit found since cannot improve it. */
-        while (sp > 0u && stack_tnear[sp - 1u] > best.t) sp--;
-        if (sp == 0u) break;
-        sp--;
-        node = stack_node[sp];
+        heat.tris++;
+        test_triangle(r, tri_next, best);
+        tri_next++;
     }
+    /* Saved after the loop, not inside it: lavapipe runs the body of an `if` that no lane
+     * takes, and a loop in that body would count against its limit on every iteration. */
+    if (BUDGET != 0u && suspended) {
+        states[slot] = vkrt_gpu_resume(1u, node, tri_next, tri_end, sp, best.t, best.u, best.v, best.tri, best.prim,
+                                       heat.nodes, heat.leaves, heat.tris, 0u, 0u, 0u);
+        for (uint i = 0u; i < sp; i++)
+            saved_stack[slot * VKRT_TRAVERSAL_STACK_SIZE + i] = vkrt_gpu_stack_entry(stack_node[i], stack_tnear[i]);
+        atomicAdd(unfinished, 1u);
+        return false;
+    }
+    mark_finished(slot);
+    return true;
+}
+
+/* In a resume dispatch: true for an invocation whose traversal is already complete. */
+bool already_finished(uint slot)
+{
+    return BUDGET != 0u && p.resume != 0u && states[slot].unfinished == 0u;
 }
 
 vec4 shade(hit best, heat_counts heat)
@@ -139,6 +218,29 @@ vec4 shade(hit best, heat_counts heat)
         return is_hit ? vec4(float(best.prim), best.u, best.v, 1.0) : vec4(VKRT_MISS, 0.0, 0.0, 0.0);
     if (!is_hit) return vec4(0.0);
     return shade_normal(tris[best.tri], best.u, best.v);
+}
+
+/* The final closest hit of pixel (x, y): its distance refined (refine_hit_distance) where the
+ * mode reports it and the device has doubles. */
+void finish_pixel_hit(uint x, uint y, inout hit best)
+{
+#ifdef VKRT_HAS_FLOAT64
+    if (MODE == VKRT_GPU_MODE_DEPTH && best.prim != NO_PRIM) {
+        dvec3 origin, dir;
+        camera_ray_double(p, x, y, origin, dir);
+        best.t = refine_hit_distance(origin, dir, 0.0LF, double(T_INFINITY), tris[best.tri], best.t);
+    }
+#endif
+}
+
+/* The final closest hit of a ray of the buffer, its distance refined where the device has
+ * doubles. */
+void finish_ray_hit(ray r, inout hit best)
+{
+#ifdef VKRT_HAS_FLOAT64
+    if (best.prim != NO_PRIM)
+        best.t = refine_hit_distance(dvec3(r.origin), dvec3(r.dir), double(r.tmin), double(r.tmax), tris[best.tri], best.t);
+#endif
 }
 
 /* Naive traversal: the closest hit carried from the previous chunk. The host clears the
@@ -178,9 +280,15 @@ void trace_buffer_ray()
             store_carried(index, best);
             return;
         }
-    } else if (valid) {
-        trace_bvh(r, best, heat);
+    } else {
+        if (already_finished(index)) return;
+        if (!valid) {
+            mark_finished(index);
+        } else if (!trace_bvh(r, index, best, heat)) {
+            return; /* its hit is written by the dispatch that finishes it */
+        }
     }
+    if (valid) finish_ray_hit(r, best);
     hits[index] = best.prim != NO_PRIM ? vkrt_gpu_hit(best.t, best.prim, best.u, best.v)
                                        : vkrt_gpu_hit(-1.0, NO_PRIM, 0.0, 0.0);
 }
@@ -210,6 +318,7 @@ void main()
         ray r = camera_ray(p, x, y);
         for (uint i = p.tri_first; i < p.tri_end; i++) test_triangle(r, i, best);
         if (p.last_chunk != 0u) {
+            finish_pixel_hit(x, y, best);
             imageStore(out_image, ivec2(local), shade(best, heat));
         } else {
             store_carried(slot, best);
@@ -217,7 +326,11 @@ void main()
         return;
     }
 
+    uint slot = local.y * p.tile_width + local.x;
+    if (already_finished(slot)) return;
     ray r = camera_ray(p, x, y);
-    trace_bvh(r, best, heat);
-    imageStore(out_image, ivec2(local), shade(best, heat));
+    if (trace_bvh(r, slot, best, heat)) {
+        finish_pixel_hit(x, y, best);
+        imageStore(out_image, ivec2(local), shade(best, heat));
+    }
 }

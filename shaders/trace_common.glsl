@@ -159,6 +159,39 @@ bool intersect_triangle(ray r, vkrt_gpu_tri tri, out float out_t, out float out_
     return intersect_triangle_watertight(r, tri, out_t, out_u, out_v);
 }
 
+#ifdef VKRT_HAS_FLOAT64
+/* The distance of the closest hit recomputed in double as the intersection of an exact ray
+ * with the triangle's plane: the pixel's ray generated in double (camera_ray_double), or a ray
+ * of the buffer as given. Float edge functions lose digits where a ray grazes a triangle, and
+ * a float ray is a few ulps off the pixel's; the plane distance of the exact ray in double has
+ * neither error. Which triangle wins is decided in float; this runs once per ray.
+ * vk_pipeline.c defines VKRT_HAS_FLOAT64 where the device has shaderFloat64 (lavapipe does);
+ * elsewhere the float distance stands. Mirrors refine_hit_distance() in src/cpu_trace.c. */
+float refine_hit_distance(dvec3 origin, dvec3 dir, double tmin, double tmax, vkrt_gpu_tri tri, float t)
+{
+    precise dvec3 v0 = dvec3(tri.v0);
+    precise dvec3 e1 = dvec3(tri.v1) - v0, e2 = dvec3(tri.v2) - v0;
+    precise dvec3 n = dvec3(e1.y * e2.z - e2.y * e1.z, e1.z * e2.x - e2.z * e1.x, e1.x * e2.y - e2.x * e1.y);
+    precise double denom = (n.x * dir.x + n.y * dir.y) + n.z * dir.z;
+    if (denom == 0.0LF) return t;
+    precise dvec3 to_v0 = v0 - origin;
+    precise double refined = ((n.x * to_v0.x + n.y * to_v0.y) + n.z * to_v0.z) / denom;
+    return refined > tmin && refined < tmax ? float(refined) : t;
+}
+
+/* The pixel's ray as the CPU double reference generates it (camera_ray_d in
+ * src/cpu_trace_real.h), from the same basis: the push constants' floats, exact in double. */
+void camera_ray_double(vkrt_gpu_push p, uint x, uint y, out dvec3 origin, out dvec3 dir)
+{
+    precise double sx = 2.0LF * (double(x) + 0.5LF) / double(p.width) - 1.0LF;
+    precise double sy = 1.0LF - 2.0LF * (double(y) + 0.5LF) / double(p.height);
+    precise dvec3 d = (dvec3(p.forward) + dvec3(p.right) * sx) + dvec3(p.up) * sy;
+    precise double len2 = (d.x * d.x + d.y * d.y) + d.z * d.z;
+    origin = dvec3(p.eye);
+    dir = d * (1.0LF / sqrt(len2));
+}
+#endif
+
 /* The shared closest-hit rule: nearer wins, and at equal distance the lower prim_id, so the
  * answer does not depend on the order triangles are visited (BVH vs naive, any builder). */
 bool hit_closer(float t, uint prim, float best_t, uint best_prim)

@@ -34,6 +34,9 @@ typedef struct vkrt_float3 { float x, y, z; } vkrt_float3;
 #define VKRT_BINDING_IMAGE 2
 #define VKRT_BINDING_HITS 3
 #define VKRT_BINDING_RAYS 4
+#define VKRT_BINDING_RESUME 5          /* vkrt_gpu_resume per pixel of a tile / ray of a chunk */
+#define VKRT_BINDING_RESUME_STACK 6    /* VKRT_TRAVERSAL_STACK_SIZE vkrt_gpu_stack_entry per slot */
+#define VKRT_BINDING_UNFINISHED 7      /* one uint: invocations that stopped at the budget */
 
 /* Specialization constant ids: features a render does not use are compiled out instead of
  * branched over (lavapipe pays nearly full price for an `if` that is false everywhere). */
@@ -42,6 +45,7 @@ typedef struct vkrt_float3 { float x, y, z; } vkrt_float3;
 #define VKRT_SPEC_HEAT 2
 #define VKRT_SPEC_RAYGEN 3
 #define VKRT_SPEC_ISECT 4
+#define VKRT_SPEC_BUDGET 5 /* BVH loop iterations per dispatch; 0 = unlimited (no budget code) */
 
 /* Values of the specialization constants; the C side asserts they equal the public enums. */
 #define VKRT_GPU_MODE_NORMAL 1
@@ -91,6 +95,19 @@ typedef struct vkrt_float3 { float x, y, z; } vkrt_float3;
  * chunks whose closest hits are merged through the hit buffer. */
 #define VKRT_NAIVE_CHUNK_TRIS 8192u
 
+/* Loop budget of lavapipe (Mesa's llvmpipe): it silently ends every loop of a shader once
+ * 65,535 iterations in all have run per SIMD group of 8 invocations (one counter shared by
+ * every loop, lp_exec_mask_function_init), with no error. BVH traversal is one flat loop of
+ * node steps and triangle tests that stops after this many iterations per dispatch, saves its
+ * state and is resumed by the next dispatch; half the limit leaves room for the state's load
+ * and save loops (VKRT_TRAVERSAL_STACK_SIZE each). Devices without the limit get 0. */
+#define VKRT_LAVAPIPE_BUDGET 32768u
+
+/* Ray mode with a budget: rays per submission, so the continuation buffers (64 bytes of
+ * state plus VKRT_TRAVERSAL_STACK_SIZE 8-byte entries per ray, 36 MiB in all) stay well
+ * under lavapipe's 128 MiB maxStorageBufferRange. A 256x256 tile has as many pixels. */
+#define VKRT_RESUME_RAY_CHUNK 65536u
+
 /* Miss value written to the id and depth channels. */
 #define VKRT_MISS (-1.0)
 
@@ -128,6 +145,34 @@ VKRT_STRUCT(vkrt_gpu_hit) {
     float v;               /* offset 12 */
 };
 
+/* BVH traversal state of an invocation that used up its budget (VKRT_SPEC_BUDGET), read back
+ * by the resume dispatch, 64 bytes. The ray itself is not saved: it is recomputed from the
+ * pixel or re-read from the ray buffer, bit for bit the same. */
+VKRT_STRUCT(vkrt_gpu_resume) {
+    VKRT_UINT unfinished;  /* offset  0; 1: resume from here, 0: done (or never stopped) */
+    VKRT_UINT node;        /* offset  4; node to visit next, 0xFFFFFFFF: pop the stack */
+    VKRT_UINT tri_next;    /* offset  8; next triangle of the current leaf */
+    VKRT_UINT tri_end;     /* offset 12; one past its last (tri_next == tri_end: no leaf) */
+    VKRT_UINT sp;          /* offset 16; stack entries saved */
+    float t;               /* offset 20; closest hit so far (t = ray tmax: none) */
+    float u;               /* offset 24 */
+    float v;               /* offset 28 */
+    VKRT_UINT tri;         /* offset 32; triangle array index of the hit */
+    VKRT_UINT prim;        /* offset 36; its prim_id, 0xFFFFFFFF: none */
+    VKRT_UINT heat_nodes;  /* offset 40; heat counters so far */
+    VKRT_UINT heat_leaves; /* offset 44 */
+    VKRT_UINT heat_tris;   /* offset 48 */
+    VKRT_UINT pad0;        /* offset 52; to 64 bytes, one cache line */
+    VKRT_UINT pad1;        /* offset 56 */
+    VKRT_UINT pad2;        /* offset 60 */
+};
+
+/* One saved traversal stack entry, 8 bytes: a pushed node and the distance its box starts. */
+VKRT_STRUCT(vkrt_gpu_stack_entry) {
+    VKRT_UINT node;        /* offset  0 */
+    float tnear;           /* offset  4 */
+};
+
 /* A ray for arbitrary-ray tracing (vkrt_trace_rays), 32 bytes, identical to vkrt_ray. */
 VKRT_STRUCT(vkrt_gpu_ray) {
     VKRT_FLOAT3 origin;    /* offset  0 */
@@ -156,7 +201,7 @@ VKRT_STRUCT(vkrt_gpu_push) {
     VKRT_UINT tri_end;     /* offset 76; naive traversal: one past the last of this chunk */
     VKRT_UINT tri_total;   /* offset 80; triangles in the scene */
     VKRT_UINT last_chunk;  /* offset 84; naive traversal: 1 when this chunk writes the image */
-    VKRT_UINT pad0;        /* offset 88 */
+    VKRT_UINT resume;      /* offset 88; BVH with a budget: 1 continues saved traversals */
     VKRT_UINT pad1;        /* offset 92 */
 };
 
@@ -177,12 +222,19 @@ _Static_assert(offsetof(vkrt_gpu_tri, n2) == 60, "vkrt_gpu_tri.n2 must match std
 _Static_assert(sizeof(vkrt_gpu_hit) == 16, "vkrt_gpu_hit must match std430");
 _Static_assert(sizeof(vkrt_gpu_ray) == 32, "vkrt_gpu_ray must match std430");
 _Static_assert(offsetof(vkrt_gpu_ray, dir) == 16, "vkrt_gpu_ray.dir must match std430");
+_Static_assert(sizeof(vkrt_gpu_resume) == 64, "vkrt_gpu_resume must match std430");
+_Static_assert(offsetof(vkrt_gpu_resume, t) == 20, "vkrt_gpu_resume.t must match std430");
+_Static_assert(offsetof(vkrt_gpu_resume, heat_tris) == 48, "vkrt_gpu_resume.heat_tris must match std430");
+_Static_assert(sizeof(vkrt_gpu_stack_entry) == 8, "vkrt_gpu_stack_entry must match std430");
+_Static_assert(offsetof(vkrt_gpu_stack_entry, tnear) == 4, "vkrt_gpu_stack_entry.tnear must match std430");
+_Static_assert(VKRT_NAIVE_CHUNK_TRIS <= VKRT_LAVAPIPE_BUDGET, "a naive chunk's loop must fit lavapipe's loop limit");
 _Static_assert(sizeof(vkrt_gpu_push) == 96, "vkrt_gpu_push must match the push-constant range");
 _Static_assert(offsetof(vkrt_gpu_push, right) == 16, "vkrt_gpu_push.right must match std430");
 _Static_assert(offsetof(vkrt_gpu_push, up) == 32, "vkrt_gpu_push.up must match std430");
 _Static_assert(offsetof(vkrt_gpu_push, forward) == 48, "vkrt_gpu_push.forward must match std430");
 _Static_assert(offsetof(vkrt_gpu_push, tile_width) == 64, "vkrt_gpu_push.tile_width must match std430");
 _Static_assert(offsetof(vkrt_gpu_push, last_chunk) == 84, "vkrt_gpu_push.last_chunk must match std430");
+_Static_assert(offsetof(vkrt_gpu_push, resume) == 88, "vkrt_gpu_push.resume must match std430");
 #endif
 
 #endif /* VKRT_SHARED_H */

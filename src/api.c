@@ -282,7 +282,8 @@ vkrt_result vkrt_render(vkrt_context *ctx, vkrt_scene *scene, const vkrt_render_
     vkrt_gpu_push camera = { 0 };
     camera_basis camera_d = { 0 };
     r = camera_setup(c, &d.camera, d.width, d.height, &camera);
-    if (r == VKRT_OK && d.precision == VKRT_PRECISION_DOUBLE) r = camera_setup_double(c, &d.camera, d.width, d.height, &camera_d);
+    /* Both CPU precisions read it: double traces from it, float refines hit distances with it. */
+    if (r == VKRT_OK) r = camera_setup_double(c, &d.camera, d.width, d.height, &camera_d);
     if (r != VKRT_OK) return r;
     vkrt_mode mode = d.mode ? d.mode : VKRT_MODE_NORMAL;
     vkrt_traversal traversal = d.traversal ? d.traversal : VKRT_TRAVERSAL_BVH;

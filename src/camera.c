@@ -1,6 +1,7 @@
 /* Pinhole camera: the basis is computed once here, in double, and rounded to the float push
  * constants both tracers read, so the CPU and the GPU start every ray from identical bits; the
- * CPU double-precision reference keeps the double basis. */
+ * CPU double-precision reference reads the same rounded basis as doubles and generates its
+ * rays from it in double. */
 #include "camera.h"
 
 #include <math.h>
@@ -27,6 +28,8 @@ static int all_finite(const float f[3])
 {
     return isfinite(f[0]) && isfinite(f[1]) && isfinite(f[2]);
 }
+
+static dvec3 through_float(dvec3 a) { return (dvec3){ (float)a.x, (float)a.y, (float)a.z }; }
 
 static void to_doubles(dvec3 a, double out[3])
 {
@@ -78,10 +81,13 @@ vkrt_result camera_setup_double(core *c, const vkrt_camera *camera, uint32_t wid
     dvec3 right = dscale(right_unit, half * aspect);
     dvec3 up_scaled = dscale(dcross(right_unit, forward), half);
 
-    to_doubles(eye, out->eye);
-    to_doubles(forward, out->forward);
-    to_doubles(right, out->right);
-    to_doubles(up_scaled, out->up);
+    /* Every tracer starts from the float basis; the reference keeps it too (as doubles), so
+     * "the exact ray of a pixel" is one ray all backends agree on, and a float tracer can
+     * recompute it exactly in double to refine its hit distances (refine_hit_distance). */
+    to_doubles(through_float(eye), out->eye);
+    to_doubles(through_float(forward), out->forward);
+    to_doubles(through_float(right), out->right);
+    to_doubles(through_float(up_scaled), out->up);
     out->width = width;
     out->height = height;
     return VKRT_OK;

@@ -5,8 +5,8 @@
 #include "../shaders/vkrt_shared.h"
 #include "core.h"
 
-/* The ray-generation basis in double, before rounding to the push constants: what the CPU
- * double-precision reference generates its rays from (same fields and meaning as in
+/* The ray-generation basis as doubles holding the push constants' float values: what the CPU
+ * double-precision reference generates its rays from, in double (same fields and meaning as in
  * vkrt_gpu_push). */
 typedef struct camera_basis {
     double eye[3], right[3], up[3], forward[3];
@@ -18,7 +18,7 @@ typedef struct camera_basis {
  * value, a field of view outside (0, 180), or an up vector parallel to the view direction. */
 vkrt_result camera_setup(core *c, const vkrt_camera *camera, uint32_t width, uint32_t height,
                          vkrt_gpu_push *push);
-/* The same checks and basis as camera_setup, kept in double. */
+/* The same checks and basis as camera_setup, as doubles (each value the push constant's). */
 vkrt_result camera_setup_double(core *c, const vkrt_camera *camera, uint32_t width, uint32_t height,
                                 camera_basis *out);
 

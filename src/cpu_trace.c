@@ -53,6 +53,27 @@ typedef struct heat_counts {
 #define REAL_TFAR_WIDEN VKRT_TFAR_WIDEN_DOUBLE
 #include "cpu_trace_real.h"
 
+/* The distance of a hit the float path found, recomputed in double as the intersection of an
+ * exact ray with the triangle's plane: the pixel's ray generated in double from the camera
+ * basis (whose values the float ray was rounded from), or a vkrt_trace_rays ray as given.
+ * Float edge functions lose digits to cancellation where a ray grazes a triangle (1.8e-5
+ * relative at 1e-4 radians), and a float ray's direction is a few ulps off the pixel's, which
+ * moves a grazing hit by that angle times tan(incidence): the plane distance of the exact ray
+ * in double has neither error. Which triangle wins is still decided in float; this runs once
+ * per ray. A ray in the plane, or a distance outside the ray's interval, keeps the float t.
+ * Mirrors refine_hit_distance() in shaders/trace_common.glsl (the GPU does this where the
+ * device has doubles). */
+static float refine_hit_distance(vec3_d origin, vec3_d dir, double tmin, double tmax, const vkrt_gpu_tri *tri,
+                                 float t)
+{
+    vec3_d v0 = v_load_d(tri->v0), v1 = v_load_d(tri->v1), v2 = v_load_d(tri->v2);
+    vec3_d n = v_cross_d(v_sub_d(v1, v0), v_sub_d(v2, v0));
+    double denom = v_dot_d(n, dir);
+    if (denom == 0.0) return t;
+    double refined = v_dot_d(n, v_sub_d(v0, origin)) / denom;
+    return refined > tmin && refined < tmax ? (float)refined : t;
+}
+
 static void shade(const cpu_trace_scene *s, const cpu_trace_params *p, const hit *best, const heat_counts *heat,
                   float out[4])
 {
@@ -134,6 +155,10 @@ static void trace_pixel(const job *j, uint32_t x, uint32_t y, float out[4])
         } else {
             ray_f r = camera_ray_f(&j->cam_f, x, y);
             best = trace_ray_f(s, p->traversal, p->intersector, &r, &heat);
+            if (best.prim != NO_PRIM) {
+                ray_d exact = camera_ray_d(&j->cam_d, x, y);
+                best.t = refine_hit_distance(exact.origin, exact.dir, 0.0, INFINITY, &s->tris[best.tri], best.t);
+            }
         }
     }
     shade(s, p, &best, &heat, out);
@@ -163,6 +188,9 @@ static vkrt_hit trace_one_ray(const job *j, const vkrt_ray *in)
     } else {
         ray_f r;
         if (ray_from_buffer_f(in, &r)) best = trace_ray_f(j->scene, p->traversal, p->intersector, &r, &heat);
+        if (best.prim != NO_PRIM)
+            best.t = refine_hit_distance((vec3_d){ r.origin.x, r.origin.y, r.origin.z }, (vec3_d){ r.dir.x, r.dir.y, r.dir.z },
+                                         r.tmin, r.tmax, &j->scene->tris[best.tri], best.t);
     }
     if (best.prim == NO_PRIM) return (vkrt_hit){ .t = -1.0f, .prim_id = VKRT_NO_HIT };
     return (vkrt_hit){ .t = best.t, .prim_id = best.prim, .u = best.u, .v = best.v };

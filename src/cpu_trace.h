@@ -23,8 +23,8 @@ typedef struct cpu_trace_params {
     vkrt_traversal traversal;   /* resolved */
     vkrt_heat heat;             /* resolved */
     vkrt_intersector intersector; /* _DEFAULT: watertight */
-    vkrt_precision precision;   /* _DEFAULT: float; double traces from camera_d */
-    camera_basis camera_d;      /* double precision only: the unrounded basis (camera_setup_double) */
+    vkrt_precision precision;   /* _DEFAULT: float */
+    camera_basis camera_d;      /* camera_setup_double: double traces from it; float refines its hit distances with it */
     uint32_t threads;           /* >= 1 */
     vkrt_progress_fn progress;  /* may be NULL; called from the calling thread */
     void *progress_user;

@@ -9,6 +9,13 @@
  * keeps a naive-traversal chunk well under a second on lavapipe. */
 #define TILE_SIZE 256u
 
+/* With a loop budget every pixel of a tile and every ray of a chunk has a continuation slot;
+ * the largest of those buffers (the saved stacks) must fit lavapipe's 128 MiB
+ * maxStorageBufferRange with room to spare. */
+_Static_assert(TILE_SIZE * TILE_SIZE <= VKRT_RESUME_RAY_CHUNK, "a tile must fit the continuation buffers");
+_Static_assert((uint64_t)VKRT_RESUME_RAY_CHUNK * VKRT_TRAVERSAL_STACK_SIZE * sizeof(vkrt_gpu_stack_entry) <= (64u << 20),
+               "continuation stacks must stay well under lavapipe's 128 MiB storage buffer range");
+
 static vkrt_result check_range(vk_context *vk, VkDeviceSize bytes, const char *what)
 {
     VkDeviceSize limit = vk->properties.limits.maxStorageBufferRange;
@@ -48,8 +55,9 @@ void gpu_scene_destroy(vk_context *vk, gpu_scene *s)
 }
 
 /* Per-call device objects: one tile-sized storage image (1x1 for rays), the readback buffer,
- * the hit buffer (naive traversal's carried hits; the output of rays), the ray buffer, a
- * descriptor set and a timestamp query pool. */
+ * the hit buffer (naive traversal's carried hits; the output of rays), the ray buffer, the
+ * continuation state, stacks and unfinished counter of budgeted BVH traversal, a descriptor
+ * set and a timestamp query pool. */
 typedef struct render_objects {
     VkImage image;
     VkDeviceMemory image_memory;
@@ -57,6 +65,9 @@ typedef struct render_objects {
     vk_buffer readback;
     vk_buffer hits;
     vk_buffer rays;
+    vk_buffer resume;
+    vk_buffer resume_stack;
+    vk_buffer unfinished; /* host-visible: read after every submission */
     VkDescriptorPool pool;
     VkDescriptorSet set;
     VkQueryPool queries;
@@ -72,6 +83,9 @@ static void render_objects_destroy(vk_context *vk, render_objects *o)
     vk_buffer_destroy(vk, &o->readback);
     vk_buffer_destroy(vk, &o->hits);
     vk_buffer_destroy(vk, &o->rays);
+    vk_buffer_destroy(vk, &o->resume);
+    vk_buffer_destroy(vk, &o->resume_stack);
+    vk_buffer_destroy(vk, &o->unfinished);
 }
 
 static vkrt_result create_image(vk_context *vk, uint32_t w, uint32_t h, render_objects *o)
@@ -126,7 +140,7 @@ static vkrt_result create_descriptors(vk_context *vk, const gpu_scene *scene, Vk
                                       render_objects *o)
 {
     VkDescriptorPoolSize sizes[] = {
-        { VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 4 },
+        { VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 7 }, /* every binding but the image */
         { VK_DESCRIPTOR_TYPE_STORAGE_IMAGE, 1 },
     };
     VkDescriptorPoolCreateInfo pool_info = {
@@ -145,32 +159,39 @@ static vkrt_result create_descriptors(vk_context *vk, const gpu_scene *scene, Vk
     };
     res = vkAllocateDescriptorSets(vk->device, &alloc, &o->set);
     if (res != VK_SUCCESS) return vk_fail(vk, res, "vkAllocateDescriptorSets");
-    VkDescriptorBufferInfo nodes = { scene->nodes.buffer, 0, VK_WHOLE_SIZE };
-    VkDescriptorBufferInfo tris = { scene->tris.buffer, 0, VK_WHOLE_SIZE };
-    VkDescriptorBufferInfo hits = { o->hits.buffer, 0, VK_WHOLE_SIZE };
-    VkDescriptorBufferInfo rays = { o->rays.buffer, 0, VK_WHOLE_SIZE };
-    VkDescriptorImageInfo image = { VK_NULL_HANDLE, o->view, VK_IMAGE_LAYOUT_GENERAL };
-    VkWriteDescriptorSet writes[] = {
-        { .sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET, .dstSet = o->set, .dstBinding = VKRT_BINDING_NODES,
-          .descriptorCount = 1, .descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, .pBufferInfo = &nodes },
-        { .sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET, .dstSet = o->set, .dstBinding = VKRT_BINDING_TRIS,
-          .descriptorCount = 1, .descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, .pBufferInfo = &tris },
-        { .sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET, .dstSet = o->set, .dstBinding = VKRT_BINDING_IMAGE,
-          .descriptorCount = 1, .descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_IMAGE, .pImageInfo = &image },
-        { .sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET, .dstSet = o->set, .dstBinding = VKRT_BINDING_HITS,
-          .descriptorCount = 1, .descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, .pBufferInfo = &hits },
-        { .sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET, .dstSet = o->set, .dstBinding = VKRT_BINDING_RAYS,
-          .descriptorCount = 1, .descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, .pBufferInfo = &rays },
+    /* Every storage buffer whole, at its binding; then the image. */
+    const struct {
+        uint32_t binding;
+        VkBuffer buffer;
+    } buffers[] = {
+        { VKRT_BINDING_NODES, scene->nodes.buffer },   { VKRT_BINDING_TRIS, scene->tris.buffer },
+        { VKRT_BINDING_HITS, o->hits.buffer },         { VKRT_BINDING_RAYS, o->rays.buffer },
+        { VKRT_BINDING_RESUME, o->resume.buffer },     { VKRT_BINDING_RESUME_STACK, o->resume_stack.buffer },
+        { VKRT_BINDING_UNFINISHED, o->unfinished.buffer },
     };
+    enum { BUFFERS = sizeof buffers / sizeof buffers[0] };
+    VkDescriptorBufferInfo infos[BUFFERS];
+    VkWriteDescriptorSet writes[BUFFERS + 1];
+    for (uint32_t i = 0; i < BUFFERS; i++) {
+        infos[i] = (VkDescriptorBufferInfo){ buffers[i].buffer, 0, VK_WHOLE_SIZE };
+        writes[i] = (VkWriteDescriptorSet){ .sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET, .dstSet = o->set,
+                                            .dstBinding = buffers[i].binding, .descriptorCount = 1,
+                                            .descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, .pBufferInfo = &infos[i] };
+    }
+    VkDescriptorImageInfo image = { VK_NULL_HANDLE, o->view, VK_IMAGE_LAYOUT_GENERAL };
+    writes[BUFFERS] = (VkWriteDescriptorSet){ .sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET, .dstSet = o->set,
+                                              .dstBinding = VKRT_BINDING_IMAGE, .descriptorCount = 1,
+                                              .descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_IMAGE, .pImageInfo = &image };
     vkUpdateDescriptorSets(vk->device, sizeof writes / sizeof writes[0], writes, 0, NULL);
     return VKRT_OK;
 }
 
 /* Image mode: a tile_w x tile_h image, hit_count = pixels for naive traversal (else 1), no
- * rays. Ray mode: a 1x1 image (the layout has the binding), hit_count = ray_count rays. */
+ * rays. Ray mode: a 1x1 image (the layout has the binding), hit_count = ray_count rays.
+ * resume_slots: continuation slots of budgeted BVH traversal (0: none needed). */
 static vkrt_result create_render_objects(vk_context *vk, const gpu_scene *scene, VkDescriptorSetLayout layout,
                                          uint32_t tile_w, uint32_t tile_h, uint32_t hit_count, uint32_t ray_count,
-                                         render_objects *o)
+                                         uint32_t resume_slots, render_objects *o)
 {
     memset(o, 0, sizeof *o);
     vkrt_result r = create_image(vk, tile_w, tile_h, o);
@@ -189,6 +210,17 @@ static vkrt_result create_render_objects(vk_context *vk, const gpu_scene *scene,
         r = vk_buffer_create(vk, (VkDeviceSize)(ray_count ? ray_count : 1) * sizeof(vkrt_gpu_ray),
                              VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT, VK_MEMORY_DEVICE,
                              "vkrt rays", &o->rays);
+    const VkDeviceSize slots = resume_slots ? resume_slots : 1;
+    if (r == VKRT_OK)
+        r = vk_buffer_create(vk, slots * sizeof(vkrt_gpu_resume), VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, VK_MEMORY_DEVICE,
+                             "vkrt resume state", &o->resume);
+    if (r == VKRT_OK)
+        r = vk_buffer_create(vk, (resume_slots ? slots * VKRT_TRAVERSAL_STACK_SIZE : 1) * sizeof(vkrt_gpu_stack_entry),
+                             VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, VK_MEMORY_DEVICE, "vkrt resume stacks",
+                             &o->resume_stack);
+    if (r == VKRT_OK)
+        r = vk_buffer_create(vk, sizeof(uint32_t), VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT,
+                             VK_MEMORY_READBACK, "vkrt unfinished count", &o->unfinished);
     if (r == VKRT_OK) r = create_descriptors(vk, scene, layout, o);
     if (r == VKRT_OK && vk->timestamps) {
         VkQueryPoolCreateInfo q = {
@@ -279,15 +311,17 @@ static void record_naive_chunks(VkCommandBuffer cmd, const vk_trace_pipeline *pi
     }
 }
 
-/* The image to GENERAL for the shader's writes; its previous contents (an earlier tile, already
- * copied out) are discarded. Returns the barrier for the transition back. */
-static VkImageMemoryBarrier record_image_to_general(VkCommandBuffer cmd, const render_objects *o, bool first)
+/* The image to GENERAL for the shader's writes. A tile's first pass discards the previous
+ * contents (an earlier tile, already copied out); a resume pass keeps the pixels finished so
+ * far. Returns the barrier for the transition back. */
+static VkImageMemoryBarrier record_image_to_general(VkCommandBuffer cmd, const render_objects *o, bool first,
+                                                    bool resume)
 {
     VkImageMemoryBarrier to_general = {
         .sType = VK_STRUCTURE_TYPE_IMAGE_MEMORY_BARRIER,
         .srcAccessMask = first ? 0 : VK_ACCESS_TRANSFER_READ_BIT,
         .dstAccessMask = VK_ACCESS_SHADER_WRITE_BIT,
-        .oldLayout = VK_IMAGE_LAYOUT_UNDEFINED,
+        .oldLayout = resume ? VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL : VK_IMAGE_LAYOUT_UNDEFINED,
         .newLayout = VK_IMAGE_LAYOUT_GENERAL,
         .srcQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED,
         .dstQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED,
@@ -299,11 +333,29 @@ static VkImageMemoryBarrier record_image_to_general(VkCommandBuffer cmd, const r
     return to_general;
 }
 
-/* The trace dispatch(es) over groups_x x groups_y workgroups, between two timestamps. */
+/* The trace dispatch(es) over groups_x x groups_y workgroups, between two timestamps. With a
+ * loop budget (BVH traversal on lavapipe) the unfinished counter is cleared first and handed
+ * to the host after. */
 static void record_dispatches(VkCommandBuffer cmd, const vk_trace_pipeline *pipe, const render_objects *o,
-                              const gpu_scene *scene, vkrt_gpu_push push, bool naive, uint32_t groups_x,
+                              const gpu_scene *scene, vkrt_gpu_push push, bool naive, bool budget, uint32_t groups_x,
                               uint32_t groups_y)
 {
+    if (budget) {
+        /* The previous pass (an earlier submission) wrote the continuation state this one
+         * reads or overwrites, and its atomics wrote the counter the fill overwrites. */
+        VkMemoryBarrier previous = {
+            .sType = VK_STRUCTURE_TYPE_MEMORY_BARRIER,
+            .srcAccessMask = VK_ACCESS_SHADER_WRITE_BIT,
+            .dstAccessMask = VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT | VK_ACCESS_TRANSFER_WRITE_BIT,
+        };
+        vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
+                             VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT, 0, 1, &previous, 0,
+                             NULL, 0, NULL);
+        vkCmdFillBuffer(cmd, o->unfinished.buffer, 0, VK_WHOLE_SIZE, 0);
+        /* The dispatch's atomics add to the cleared counter. */
+        record_buffer_barrier(cmd, o->unfinished.buffer, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_WRITE_BIT,
+                              VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT);
+    }
     if (o->queries) {
         vkCmdResetQueryPool(cmd, o->queries, 0, 2);
         vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, o->queries, 0);
@@ -317,14 +369,19 @@ static void record_dispatches(VkCommandBuffer cmd, const vk_trace_pipeline *pipe
         record_naive_chunks(cmd, pipe, o, scene, push, groups_x, groups_y);
     }
     if (o->queries) vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, o->queries, 1);
+    /* The host reads the counter after the fence. */
+    if (budget)
+        record_buffer_barrier(cmd, o->unfinished.buffer, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
+                              VK_ACCESS_SHADER_WRITE_BIT, VK_PIPELINE_STAGE_HOST_BIT, VK_ACCESS_HOST_READ_BIT);
 }
 
-/* Records one tile: trace dispatch(es), then a copy of the tile image into the readback buffer. */
+/* Records one pass over a tile (its first, or a resume of the traversals the budget stopped):
+ * trace dispatch(es), then a copy of the tile image into the readback buffer. */
 static void record_tile(VkCommandBuffer cmd, const vk_trace_pipeline *pipe, const render_objects *o,
-                        const gpu_scene *scene, vkrt_gpu_push push, bool naive, bool first_tile)
+                        const gpu_scene *scene, vkrt_gpu_push push, bool naive, bool budget, bool first_tile)
 {
-    VkImageMemoryBarrier to_general = record_image_to_general(cmd, o, first_tile);
-    record_dispatches(cmd, pipe, o, scene, push, naive, div_up(push.tile_width, VKRT_TRACE_GROUP_X),
+    VkImageMemoryBarrier to_general = record_image_to_general(cmd, o, first_tile && !push.resume, push.resume != 0);
+    record_dispatches(cmd, pipe, o, scene, push, naive, budget, div_up(push.tile_width, VKRT_TRACE_GROUP_X),
                       div_up(push.tile_height, VKRT_TRACE_GROUP_Y));
     /* The copy reads what the shader wrote. */
     VkImageMemoryBarrier to_transfer = to_general;
@@ -356,18 +413,69 @@ static double tile_device_ms(vk_context *vk, const render_objects *o)
     return (double)(stamps[1] - stamps[0]) * vk->timestamp_period_ns * 1e-6;
 }
 
+/* After a pass with a loop budget: how many traversals it left unfinished. */
+static vkrt_result read_unfinished(vk_context *vk, render_objects *o, uint32_t *out_count)
+{
+    vkrt_result r = vk_buffer_invalidate(vk, &o->unfinished);
+    *out_count = r == VKRT_OK ? *(const uint32_t *)o->unfinished.mapped : 0;
+    return r;
+}
+
+static void record_rays(VkCommandBuffer cmd, const vk_trace_pipeline *pipe, const render_objects *o,
+                        const gpu_scene *scene, vkrt_gpu_push push, bool naive, bool budget, bool first_chunk);
+
+/* What one tile or ray chunk is traced with. */
+typedef struct pass_desc {
+    const vk_trace_pipeline *pipe;
+    const gpu_scene *scene;
+    bool naive, budget;
+    bool rays;         /* a ray chunk, else an image tile */
+    bool first;        /* the first tile or chunk of the call */
+    const char *what;  /* "render" or "trace", for the cancellation message */
+    vkrt_progress_fn progress;
+    void *progress_user;
+    float fraction;    /* progress reported between passes */
+} pass_desc;
+
+/* Submits the tile's or chunk's first pass, then resume passes while the loop budget left any
+ * traversal unfinished (one pass without a budget), with progress and cancellation between
+ * them. Adds the device time to *device_ms (may be NULL); the readback buffer then holds the
+ * complete result. */
+static vkrt_result run_passes(vk_context *vk, render_objects *o, const pass_desc *d, vkrt_gpu_push push,
+                              double *device_ms)
+{
+    push.resume = 0;
+    for (;;) {
+        VkCommandBuffer cmd;
+        vkrt_result r = vk_commands_begin(vk, &cmd);
+        if (r != VKRT_OK) return r;
+        if (d->rays) record_rays(cmd, d->pipe, o, d->scene, push, d->naive, d->budget, d->first);
+        else record_tile(cmd, d->pipe, o, d->scene, push, d->naive, d->budget, d->first);
+        if ((r = vk_commands_submit_wait(vk, cmd)) != VKRT_OK) return r;
+        if (device_ms) *device_ms += tile_device_ms(vk, o);
+        uint32_t unfinished = 0;
+        if (d->budget && (r = read_unfinished(vk, o, &unfinished)) != VKRT_OK) return r;
+        if (unfinished == 0) return vk_buffer_invalidate(vk, &o->readback);
+        if (d->progress && !d->progress(d->progress_user, "trace", d->fraction))
+            return core_fail(vk->core, VKRT_ERROR_CANCELLED, "%s cancelled by the progress callback", d->what);
+        push.resume = 1;
+    }
+}
+
 vkrt_result gpu_trace_render(vk_context *vk, const gpu_scene *scene, const gpu_trace_params *params,
                              float *out_rgba, double *out_device_ms)
 {
     *out_device_ms = 0.0;
     const uint32_t width = params->camera.width, height = params->camera.height;
     const bool naive = params->traversal == VKRT_TRAVERSAL_NAIVE;
+    /* Naive traversal needs no budget: each chunk dispatch loops VKRT_NAIVE_CHUNK_TRIS times. */
     vk_trace_variant variant = {
         .mode = gpu_mode(params->mode),
         .traversal = naive ? VKRT_GPU_TRAVERSAL_NAIVE : VKRT_GPU_TRAVERSAL_BVH,
         .heat = gpu_heat(params->heat),
         .raygen = VKRT_GPU_RAYGEN_CAMERA,
         .isect = gpu_isect(params->intersector),
+        .budget = naive ? 0 : vk->trace_budget,
     };
     /* Only heatmap reads the heat kind: other modes share one pipeline whatever it is. */
     if (variant.mode != VKRT_GPU_MODE_HEATMAP) variant.heat = VKRT_GPU_HEAT_NODES;
@@ -375,10 +483,12 @@ vkrt_result gpu_trace_render(vk_context *vk, const gpu_scene *scene, const gpu_t
     vkrt_result r = vk_trace_pipeline_get(vk, variant, &pipe);
     if (r != VKRT_OK) return r;
 
+    const bool budget = variant.budget != 0;
     const uint32_t tile_w = width < TILE_SIZE ? width : TILE_SIZE;
     const uint32_t tile_h = height < TILE_SIZE ? height : TILE_SIZE;
     render_objects o;
-    r = create_render_objects(vk, scene, pipe.set_layout, tile_w, tile_h, naive ? tile_w * tile_h : 1, 0, &o);
+    r = create_render_objects(vk, scene, pipe.set_layout, tile_w, tile_h, naive ? tile_w * tile_h : 1, 0,
+                              budget ? tile_w * tile_h : 0, &o);
     const uint32_t tiles_x = div_up(width, tile_w), tiles_y = div_up(height, tile_h);
     const uint32_t tiles = tiles_x * tiles_y;
     for (uint32_t t = 0; r == VKRT_OK && t < tiles; t++) {
@@ -395,12 +505,10 @@ vkrt_result gpu_trace_render(vk_context *vk, const gpu_scene *scene, const gpu_t
         push.tri_end = scene->tri_count;
         push.tri_total = scene->tri_count;
         push.last_chunk = 1;
-        VkCommandBuffer cmd;
-        if ((r = vk_commands_begin(vk, &cmd)) != VKRT_OK) break;
-        record_tile(cmd, &pipe, &o, scene, push, naive, t == 0);
-        if ((r = vk_commands_submit_wait(vk, cmd)) != VKRT_OK) break;
-        *out_device_ms += tile_device_ms(vk, &o);
-        if ((r = vk_buffer_invalidate(vk, &o.readback)) != VKRT_OK) break;
+        const pass_desc pass = { .pipe = &pipe, .scene = scene, .naive = naive, .budget = budget, .first = t == 0,
+                                 .what = "render", .progress = params->progress,
+                                 .progress_user = params->progress_user, .fraction = (float)t / (float)tiles };
+        if ((r = run_passes(vk, &o, &pass, push, out_device_ms)) != VKRT_OK) break;
         const float *src = o.readback.mapped;
         for (uint32_t y = 0; y < push.tile_height; y++) {
             float *dst = out_rgba + ((size_t)(push.tile_y + y) * width + push.tile_x) * 4;
@@ -412,14 +520,14 @@ vkrt_result gpu_trace_render(vk_context *vk, const gpu_scene *scene, const gpu_t
     return r;
 }
 
-/* Records one chunk of rays: dispatch(es) over the rays, then a copy of the hits into the
- * readback buffer. */
+/* Records one pass over a chunk of rays (its first, or a resume): dispatch(es) over the rays,
+ * then a copy of the hits into the readback buffer. */
 static void record_rays(VkCommandBuffer cmd, const vk_trace_pipeline *pipe, const render_objects *o,
-                        const gpu_scene *scene, vkrt_gpu_push push, bool naive, bool first_chunk)
+                        const gpu_scene *scene, vkrt_gpu_push push, bool naive, bool budget, bool first_chunk)
 {
     /* The storage image is never written in ray mode, but its descriptor must be in the layout
      * it names. */
-    if (first_chunk) record_image_to_general(cmd, o, true);
+    if (first_chunk && !push.resume) record_image_to_general(cmd, o, true, false);
     /* The shader reads the rays the host (or a staging copy) wrote, and overwrites hits that
      * the previous chunk's copy read. */
     VkMemoryBarrier inputs = {
@@ -432,7 +540,7 @@ static void record_rays(VkCommandBuffer cmd, const vk_trace_pipeline *pipe, cons
                          0, NULL);
     /* One invocation per ray, 1D over whole workgroups; VKRT_RAY_CHUNK keeps the count of
      * groups far below the 65,535 a dispatch allows. */
-    record_dispatches(cmd, pipe, o, scene, push, naive, div_up(push.tile_width, VKRT_TRACE_GROUP_SIZE), 1);
+    record_dispatches(cmd, pipe, o, scene, push, naive, budget, div_up(push.tile_width, VKRT_TRACE_GROUP_SIZE), 1);
     /* The copy reads the hits the shader wrote. */
     record_buffer_barrier(cmd, o->hits.buffer, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_WRITE_BIT,
                           VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_READ_BIT);
@@ -454,13 +562,17 @@ vkrt_result gpu_trace_rays(vk_context *vk, const gpu_scene *scene, const gpu_tra
         .heat = VKRT_GPU_HEAT_NODES,
         .raygen = VKRT_GPU_RAYGEN_BUFFER,
         .isect = gpu_isect(params->intersector),
+        .budget = naive ? 0 : vk->trace_budget,
     };
     vk_trace_pipeline pipe;
     vkrt_result r = vk_trace_pipeline_get(vk, variant, &pipe);
     if (r != VKRT_OK) return r;
-    const uint32_t chunk = count < VKRT_RAY_CHUNK ? (uint32_t)count : VKRT_RAY_CHUNK;
+    const bool budget = variant.budget != 0;
+    /* With a budget, smaller chunks keep the continuation buffers small. */
+    const uint32_t max_chunk = budget ? VKRT_RESUME_RAY_CHUNK : VKRT_RAY_CHUNK;
+    const uint32_t chunk = count < max_chunk ? (uint32_t)count : max_chunk;
     render_objects o;
-    r = create_render_objects(vk, scene, pipe.set_layout, 1, 1, chunk, chunk, &o);
+    r = create_render_objects(vk, scene, pipe.set_layout, 1, 1, chunk, chunk, budget ? chunk : 0, &o);
     const size_t chunks = (count + chunk - 1) / chunk;
     for (size_t k = 0; r == VKRT_OK && k < chunks; k++) {
         if (params->progress && !params->progress(params->progress_user, "trace", (float)k / (float)chunks)) {
@@ -472,11 +584,10 @@ vkrt_result gpu_trace_rays(vk_context *vk, const gpu_scene *scene, const gpu_tra
         if ((r = vk_buffer_upload(vk, &o.rays, rays + first, (VkDeviceSize)n * sizeof *rays)) != VKRT_OK) break;
         vkrt_gpu_push push = { .tile_width = n, .tile_height = 1, .tri_end = scene->tri_count,
                                .tri_total = scene->tri_count, .last_chunk = 1 };
-        VkCommandBuffer cmd;
-        if ((r = vk_commands_begin(vk, &cmd)) != VKRT_OK) break;
-        record_rays(cmd, &pipe, &o, scene, push, naive, k == 0);
-        if ((r = vk_commands_submit_wait(vk, cmd)) != VKRT_OK) break;
-        if ((r = vk_buffer_invalidate(vk, &o.readback)) != VKRT_OK) break;
+        const pass_desc pass = { .pipe = &pipe, .scene = scene, .naive = naive, .budget = budget, .rays = true,
+                                 .first = k == 0, .what = "trace", .progress = params->progress,
+                                 .progress_user = params->progress_user, .fraction = (float)k / (float)chunks };
+        if ((r = run_passes(vk, &o, &pass, push, NULL)) != VKRT_OK) break;
         memcpy(out_hits + first, o.readback.mapped, (size_t)n * sizeof *out_hits);
     }
     if (r == VKRT_OK && params->progress) params->progress(params->progress_user, "trace", 1.0f);

@@ -42,7 +42,8 @@ typedef struct gpu_trace_rays_params {
     void *progress_user;
 } gpu_trace_rays_params;
 
-/* The closest hit of each ray (see vkrt_trace_rays), VKRT_RAY_CHUNK rays per submission. */
+/* The closest hit of each ray (see vkrt_trace_rays), VKRT_RAY_CHUNK rays per submission
+ * (VKRT_RESUME_RAY_CHUNK with a loop budget, plus resume submissions while any is unfinished). */
 vkrt_result gpu_trace_rays(vk_context *vk, const gpu_scene *scene, const gpu_trace_rays_params *params,
                            const vkrt_ray *rays, size_t count, vkrt_hit *out_hits);
 

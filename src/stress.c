@@ -6,7 +6,6 @@
  * 2013: rays aimed at points of shared edges and vertices. Uses vkrt.h only. */
 #include "stress.h"
 
-#include <inttypes.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>

@@ -3,6 +3,7 @@
 #include <stdio.h>
 #include <string.h>
 
+#include "../shaders/vkrt_shared.h"
 #include "vk_pipeline.h"
 
 #define VALIDATION_LAYER "VK_LAYER_KHRONOS_validation"
@@ -257,6 +258,20 @@ static vkrt_result create_device(vk_context *vk)
     vkGetPhysicalDeviceQueueFamilyProperties(vk->physical, &count, families);
     vk->timestamps = families[vk->queue_family].timestampValidBits > 0 && vk->properties.limits.timestampPeriod > 0;
     vk->timestamp_period_ns = vk->properties.limits.timestampPeriod;
+    /* lavapipe ends loops silently after 65,535 iterations per SIMD group; real GPUs have no
+     * such limit, and their pipelines keep no budget code. */
+    VkPhysicalDeviceDriverProperties driver = { .sType = VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_DRIVER_PROPERTIES };
+    VkPhysicalDeviceProperties2 props2 = { .sType = VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_PROPERTIES_2, .pNext = &driver };
+    vkGetPhysicalDeviceProperties2(vk->physical, &props2);
+    bool llvmpipe = driver.driverID == VK_DRIVER_ID_MESA_LLVMPIPE ||
+                    vk->properties.deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU;
+    vk->trace_budget = llvmpipe ? VKRT_LAVAPIPE_BUDGET : 0;
+    /* Doubles refine each hit's distance once per ray (refine_hit_distance in the shader); a
+     * device without them keeps the float distance. */
+    VkPhysicalDeviceFeatures supported;
+    vkGetPhysicalDeviceFeatures(vk->physical, &supported);
+    vk->float64 = supported.shaderFloat64 == VK_TRUE;
+    VkPhysicalDeviceFeatures enabled = { .shaderFloat64 = supported.shaderFloat64 };
 
     float priority = 1.0f;
     VkDeviceQueueCreateInfo queue = {
@@ -269,6 +284,7 @@ static vkrt_result create_device(vk_context *vk)
         .sType = VK_STRUCTURE_TYPE_DEVICE_CREATE_INFO,
         .queueCreateInfoCount = 1,
         .pQueueCreateInfos = &queue,
+        .pEnabledFeatures = &enabled,
     };
     VkResult res = vkCreateDevice(vk->physical, &info, NULL, &vk->device);
     if (res != VK_SUCCESS) return vk_fail(vk, res, "vkCreateDevice");

@@ -24,6 +24,8 @@ typedef struct vk_context {
     uint32_t queue_family;
     bool timestamps;                  /* the queue supports timestamp queries */
     double timestamp_period_ns;
+    bool float64;                     /* shaderFloat64 enabled: the shader refines hit distances in double */
+    uint32_t trace_budget;            /* BVH loop iterations per dispatch (VKRT_SPEC_BUDGET); 0: unlimited */
     VkCommandPool command_pool;
     VkPipelineCache pipeline_cache;
     char *pipeline_cache_path;        /* NULL: in memory only */

@@ -83,6 +83,9 @@ static vkrt_result create_layouts(vk_context *vk, vk_pipelines *p)
         { VKRT_BINDING_IMAGE, VK_DESCRIPTOR_TYPE_STORAGE_IMAGE, 1, VK_SHADER_STAGE_COMPUTE_BIT, NULL },
         { VKRT_BINDING_HITS, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, VK_SHADER_STAGE_COMPUTE_BIT, NULL },
         { VKRT_BINDING_RAYS, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, VK_SHADER_STAGE_COMPUTE_BIT, NULL },
+        { VKRT_BINDING_RESUME, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, VK_SHADER_STAGE_COMPUTE_BIT, NULL },
+        { VKRT_BINDING_RESUME_STACK, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, VK_SHADER_STAGE_COMPUTE_BIT, NULL },
+        { VKRT_BINDING_UNFINISHED, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, VK_SHADER_STAGE_COMPUTE_BIT, NULL },
     };
     VkDescriptorSetLayoutCreateInfo set_info = {
         .sType = VK_STRUCTURE_TYPE_DESCRIPTOR_SET_LAYOUT_CREATE_INFO,
@@ -104,11 +107,33 @@ static vkrt_result create_layouts(vk_context *vk, vk_pipelines *p)
     return VKRT_OK;
 }
 
+/* trace.comp with "#define VKRT_HAS_FLOAT64" after its #version line where the device has
+ * doubles: the Float64 capability may only appear in a module for a device that enabled it,
+ * and a specialization constant cannot remove a capability. NULL when out of memory. */
+static char *trace_source(vk_context *vk)
+{
+    static const char define[] = "#define VKRT_HAS_FLOAT64 1\n";
+    const char *source = vkrt_shader_trace_comp;
+    const char *version = strstr(source, "#version");
+    const char *after = version ? strchr(version, '\n') : NULL;
+    size_t head = after && vk->float64 ? (size_t)(after + 1 - source) : 0;
+    size_t length = strlen(source), extra = head ? sizeof define - 1 : 0;
+    char *text = core_alloc_array(vk->core, length + extra + 1, 1);
+    if (!text) return NULL;
+    memcpy(text, source, head);
+    memcpy(text + head, define, extra);
+    memcpy(text + head + extra, source + head, length - head + 1);
+    return text;
+}
+
 static vkrt_result create_module(vk_context *vk, vk_pipelines *p)
 {
     uint32_t *words;
     size_t count;
-    vkrt_result r = vk_compile_glsl(vk->core, "trace.comp", vkrt_shader_trace_comp, &words, &count);
+    char *source = trace_source(vk);
+    if (!source) return core_fail(vk->core, VKRT_ERROR_OUT_OF_MEMORY, "out of memory for the trace shader source");
+    vkrt_result r = vk_compile_glsl(vk->core, "trace.comp", source, &words, &count);
+    core_free(vk->core, source);
     if (r != VKRT_OK) return r;
     VkShaderModuleCreateInfo info = {
         .sType = VK_STRUCTURE_TYPE_SHADER_MODULE_CREATE_INFO,
@@ -154,6 +179,7 @@ vkrt_result vk_trace_pipeline_get(vk_context *vk, vk_trace_variant variant, vk_t
         { VKRT_SPEC_HEAT, offsetof(vk_trace_variant, heat), sizeof(uint32_t) },
         { VKRT_SPEC_RAYGEN, offsetof(vk_trace_variant, raygen), sizeof(uint32_t) },
         { VKRT_SPEC_ISECT, offsetof(vk_trace_variant, isect), sizeof(uint32_t) },
+        { VKRT_SPEC_BUDGET, offsetof(vk_trace_variant, budget), sizeof(uint32_t) },
     };
     VkSpecializationInfo spec = {
         .mapEntryCount = sizeof entries / sizeof entries[0],

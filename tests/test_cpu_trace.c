@@ -794,6 +794,11 @@ static void cpu_trace_rays_follow_the_documented_rules(void)
     check_ray_rules_on(cpu, VKRT_PRECISION_DOUBLE, "cpu double");
 }
 
+static void cpu_grazing_hit_distances_are_exact(void)
+{
+    check_grazing_distances_on(cpu, cpu, "cpu float");
+}
+
 static void cpu_secondary_rays_never_rehit_their_own_triangle(void)
 {
     check_no_self_intersection_on(cpu, "cpu");
@@ -934,6 +939,7 @@ int main(void)
     RUN(cpu_trace_rays_bvh_naive_and_precisions_agree);
     RUN(double_reference_and_float_agree_on_camera_renders);
     RUN(eye_inside_a_closed_mesh_always_hits);
+    RUN(cpu_grazing_hit_distances_are_exact);
     RUN(cpu_secondary_rays_never_rehit_their_own_triangle);
     vkrt_context_destroy(cpu);
     return check_exit();

@@ -222,6 +222,109 @@ static void gpu_render_rejects_bad_arguments(void)
 }
 
 /* Fills `count` words with distinct, ordinary float bit patterns (no NaNs to be canonicalised). */
+/* ---- check shaders: a compute shader of shaders/ run once over storage buffers ---- */
+
+/* Buffer i at binding i: data[i] uploaded, or, where data[i] is NULL, a host-readable output. */
+static bool create_check_buffers(vk_buffer *buffers, const void *const *data, const size_t *sizes, uint32_t count)
+{
+    vk_context *vk = gpu->vk;
+    bool ok = true;
+    for (uint32_t i = 0; i < count && ok; i++) {
+        ok = data[i] ? vk_buffer_create(vk, sizes[i], VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT,
+                                        VK_MEMORY_DEVICE, "check input", &buffers[i]) == VKRT_OK &&
+                           vk_buffer_upload(vk, &buffers[i], data[i], sizes[i]) == VKRT_OK
+                     : vk_buffer_create(vk, sizes[i], VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, VK_MEMORY_READBACK,
+                                        "check output", &buffers[i]) == VKRT_OK;
+    }
+    CHECK_MSG(ok, "check buffers: %s", vkrt_context_last_error(gpu));
+    return ok;
+}
+
+/* Compiles `source`, binds buffers[i] at binding i, pushes `push`, dispatches `groups` x 1 x 1
+ * and waits; the host may then read the READBACK buffers (invalidated here). */
+static bool run_check_shader(const char *name, const char *source, vk_buffer *buffers, uint32_t count,
+                             const void *push, uint32_t push_size, uint32_t groups)
+{
+    enum { MAX_BINDINGS = 8 };
+    vk_context *vk = gpu->vk;
+    VkDescriptorSetLayout set_layout = VK_NULL_HANDLE;
+    VkPipelineLayout layout = VK_NULL_HANDLE;
+    VkShaderModule module = VK_NULL_HANDLE;
+    VkPipeline pipeline = VK_NULL_HANDLE;
+    VkDescriptorPool pool = VK_NULL_HANDLE;
+    uint32_t *spirv = NULL;
+    size_t spirv_words = 0;
+    bool ok = count <= MAX_BINDINGS && vk_compile_glsl(vk->core, name, source, &spirv, &spirv_words) == VKRT_OK;
+    CHECK_MSG(ok, "%s: %s", name, vkrt_context_last_error(gpu));
+    if (!ok) return false;
+    VkDescriptorSetLayoutBinding b[MAX_BINDINGS];
+    for (uint32_t i = 0; i < count; i++)
+        b[i] = (VkDescriptorSetLayoutBinding){ i, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, VK_SHADER_STAGE_COMPUTE_BIT, NULL };
+    VkDescriptorSetLayoutCreateInfo sl = { .sType = VK_STRUCTURE_TYPE_DESCRIPTOR_SET_LAYOUT_CREATE_INFO,
+                                           .bindingCount = count, .pBindings = b };
+    VkPushConstantRange range = { VK_SHADER_STAGE_COMPUTE_BIT, 0, push_size };
+    VkShaderModuleCreateInfo mi = { .sType = VK_STRUCTURE_TYPE_SHADER_MODULE_CREATE_INFO, .codeSize = spirv_words * 4,
+                                    .pCode = spirv };
+    VkDescriptorPoolSize ps = { VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, count };
+    VkDescriptorPoolCreateInfo pi = { .sType = VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO, .maxSets = 1,
+                                      .poolSizeCount = 1, .pPoolSizes = &ps };
+    ok = vkCreateDescriptorSetLayout(vk->device, &sl, NULL, &set_layout) == VK_SUCCESS;
+    VkPipelineLayoutCreateInfo pl = { .sType = VK_STRUCTURE_TYPE_PIPELINE_LAYOUT_CREATE_INFO, .setLayoutCount = 1,
+                                      .pSetLayouts = &set_layout, .pushConstantRangeCount = 1,
+                                      .pPushConstantRanges = &range };
+    ok = ok && vkCreatePipelineLayout(vk->device, &pl, NULL, &layout) == VK_SUCCESS;
+    ok = ok && vkCreateShaderModule(vk->device, &mi, NULL, &module) == VK_SUCCESS;
+    VkComputePipelineCreateInfo ci = {
+        .sType = VK_STRUCTURE_TYPE_COMPUTE_PIPELINE_CREATE_INFO,
+        .stage = { .sType = VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO, .stage = VK_SHADER_STAGE_COMPUTE_BIT,
+                   .module = module, .pName = "main" },
+        .layout = layout,
+    };
+    ok = ok && vkCreateComputePipelines(vk->device, VK_NULL_HANDLE, 1, &ci, NULL, &pipeline) == VK_SUCCESS;
+    ok = ok && vkCreateDescriptorPool(vk->device, &pi, NULL, &pool) == VK_SUCCESS;
+    VkDescriptorSet set = VK_NULL_HANDLE;
+    VkDescriptorSetAllocateInfo ai = { .sType = VK_STRUCTURE_TYPE_DESCRIPTOR_SET_ALLOCATE_INFO, .descriptorPool = pool,
+                                       .descriptorSetCount = 1, .pSetLayouts = &set_layout };
+    ok = ok && vkAllocateDescriptorSets(vk->device, &ai, &set) == VK_SUCCESS;
+    CHECK_MSG(ok, "%s: pipeline set-up failed", name);
+    if (ok) {
+        VkDescriptorBufferInfo bi[MAX_BINDINGS];
+        VkWriteDescriptorSet w[MAX_BINDINGS];
+        for (uint32_t i = 0; i < count; i++) {
+            bi[i] = (VkDescriptorBufferInfo){ buffers[i].buffer, 0, VK_WHOLE_SIZE };
+            w[i] = (VkWriteDescriptorSet){ .sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET, .dstSet = set, .dstBinding = i,
+                                           .descriptorCount = 1, .descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER,
+                                           .pBufferInfo = &bi[i] };
+        }
+        vkUpdateDescriptorSets(vk->device, count, w, 0, NULL);
+        VkCommandBuffer cmd;
+        ok = vk_commands_begin(vk, &cmd) == VKRT_OK;
+        if (ok) {
+            vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline);
+            vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, layout, 0, 1, &set, 0, NULL);
+            vkCmdPushConstants(cmd, layout, VK_SHADER_STAGE_COMPUTE_BIT, 0, push_size, push);
+            vkCmdDispatch(cmd, groups, 1, 1);
+            /* The host reads what the shader wrote. */
+            VkMemoryBarrier to_host = { .sType = VK_STRUCTURE_TYPE_MEMORY_BARRIER,
+                                        .srcAccessMask = VK_ACCESS_SHADER_WRITE_BIT,
+                                        .dstAccessMask = VK_ACCESS_HOST_READ_BIT };
+            vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_PIPELINE_STAGE_HOST_BIT, 0, 1, &to_host, 0,
+                                 NULL, 0, NULL);
+            ok = vk_commands_submit_wait(vk, cmd) == VKRT_OK;
+        }
+        for (uint32_t i = 0; ok && i < count; i++)
+            if (buffers[i].mapped) ok = vk_buffer_invalidate(vk, &buffers[i]) == VKRT_OK;
+        CHECK_MSG(ok, "%s: dispatch failed: %s", name, vkrt_context_last_error(gpu));
+    }
+    if (pool) vkDestroyDescriptorPool(vk->device, pool, NULL);
+    if (pipeline) vkDestroyPipeline(vk->device, pipeline, NULL);
+    if (module) vkDestroyShaderModule(vk->device, module, NULL);
+    if (layout) vkDestroyPipelineLayout(vk->device, layout, NULL);
+    if (set_layout) vkDestroyDescriptorSetLayout(vk->device, set_layout, NULL);
+    core_free(vk->core, spirv);
+    return ok;
+}
+
 static void fill_distinct(void *p, size_t bytes, float base)
 {
     for (size_t i = 0; i < bytes / 4; i++) {
@@ -235,112 +338,95 @@ static void fill_distinct(void *p, size_t bytes, float base)
  * the words must equal the C struct's memory word for word. */
 static void gpu_shared_layouts_match_c(void)
 {
-    vk_context *vk = gpu->vk;
     vkrt_gpu_node nodes[2];
     vkrt_gpu_tri tris[2];
     vkrt_gpu_hit hits[2];
     vkrt_gpu_ray rays[2];
     vkrt_gpu_push push;
+    vkrt_gpu_resume states[2];
+    vkrt_gpu_stack_entry entries[2];
     fill_distinct(nodes, sizeof nodes, 100.0f);
     fill_distinct(tris, sizeof tris, 200.0f);
     fill_distinct(hits, sizeof hits, 300.0f);
     fill_distinct(rays, sizeof rays, 350.0f);
     fill_distinct(&push, sizeof push, 400.0f);
+    fill_distinct(states, sizeof states, 500.0f);
+    fill_distinct(entries, sizeof entries, 600.0f);
     /* The order in which layout_check.comp writes the structs out. */
-    const void *parts[] = { &nodes[1], &tris[1], &hits[1], &rays[1], &push };
-    const size_t part_sizes[] = { sizeof nodes[1], sizeof tris[1], sizeof hits[1], sizeof rays[1], sizeof push };
-    uint32_t expected[64];
+    const void *parts[] = { &nodes[1], &tris[1], &hits[1], &rays[1], &push, &states[1], &entries[1] };
+    const size_t part_sizes[] = { sizeof nodes[1], sizeof tris[1],  sizeof hits[1],   sizeof rays[1],
+                                  sizeof push,     sizeof states[1], sizeof entries[1] };
+    uint32_t expected[128];
     size_t words = 0;
-    for (int i = 0; i < 5; i++) {
+    for (int i = 0; i < 7; i++) {
         memcpy(expected + words, parts[i], part_sizes[i]);
         words += part_sizes[i] / 4;
     }
-    CHECK(words <= 64);
+    CHECK(words <= 128);
 
-    /* Bindings 0-2 and 4 are inputs; binding 3 receives the words. */
-    vk_buffer in[4] = { 0 }, out = { 0 };
-    const void *data[4] = { nodes, tris, hits, rays };
-    const size_t sizes[4] = { sizeof nodes, sizeof tris, sizeof hits, sizeof rays };
-    VkDescriptorSetLayout set_layout = VK_NULL_HANDLE;
-    VkPipelineLayout layout = VK_NULL_HANDLE;
-    VkShaderModule module = VK_NULL_HANDLE;
-    VkPipeline pipeline = VK_NULL_HANDLE;
-    VkDescriptorPool pool = VK_NULL_HANDLE;
-    uint32_t *spirv = NULL;
-    size_t spirv_words = 0;
-    bool ok = true;
-    for (int i = 0; i < 4 && ok; i++) {
-        ok = vk_buffer_create(vk, sizes[i], VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT,
-                              VK_MEMORY_DEVICE, "layout input", &in[i]) == VKRT_OK &&
-             vk_buffer_upload(vk, &in[i], data[i], sizes[i]) == VKRT_OK;
-    }
-    ok = ok && vk_buffer_create(vk, 64 * 4, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, VK_MEMORY_READBACK, "layout output",
-                                &out) == VKRT_OK;
-    ok = ok && vk_compile_glsl(vk->core, "layout_check.comp", vkrt_shader_layout_check_comp, &spirv, &spirv_words) == VKRT_OK;
-    CHECK_MSG(ok, "setup: %s", vkrt_context_last_error(gpu));
+    /* Bindings 0-2 and 4-6 are inputs; binding 3 receives the words. */
+    vk_buffer buffers[7] = { 0 };
+    const void *data[7] = { nodes, tris, hits, NULL, rays, states, entries };
+    const size_t sizes[7] = { sizeof nodes, sizeof tris, sizeof hits, 128 * 4, sizeof rays, sizeof states, sizeof entries };
+    bool ok = create_check_buffers(buffers, data, sizes, 7);
+    ok = ok && run_check_shader("layout_check.comp", vkrt_shader_layout_check_comp, buffers, 7, &push, sizeof push, 1);
     if (ok) {
-        VkDescriptorSetLayoutBinding b[5];
-        for (uint32_t i = 0; i < 5; i++)
-            b[i] = (VkDescriptorSetLayoutBinding){ i, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, VK_SHADER_STAGE_COMPUTE_BIT, NULL };
-        VkDescriptorSetLayoutCreateInfo sl = { .sType = VK_STRUCTURE_TYPE_DESCRIPTOR_SET_LAYOUT_CREATE_INFO, .bindingCount = 5, .pBindings = b };
-        VkPushConstantRange range = { VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof push };
-        VkShaderModuleCreateInfo mi = { .sType = VK_STRUCTURE_TYPE_SHADER_MODULE_CREATE_INFO, .codeSize = spirv_words * 4, .pCode = spirv };
-        VkDescriptorPoolSize ps = { VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 5 };
-        VkDescriptorPoolCreateInfo pi = { .sType = VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO, .maxSets = 1, .poolSizeCount = 1, .pPoolSizes = &ps };
-        ok = vkCreateDescriptorSetLayout(vk->device, &sl, NULL, &set_layout) == VK_SUCCESS;
-        VkPipelineLayoutCreateInfo pl = { .sType = VK_STRUCTURE_TYPE_PIPELINE_LAYOUT_CREATE_INFO, .setLayoutCount = 1,
-                                          .pSetLayouts = &set_layout, .pushConstantRangeCount = 1, .pPushConstantRanges = &range };
-        ok = ok && vkCreatePipelineLayout(vk->device, &pl, NULL, &layout) == VK_SUCCESS;
-        ok = ok && vkCreateShaderModule(vk->device, &mi, NULL, &module) == VK_SUCCESS;
-        VkComputePipelineCreateInfo ci = {
-            .sType = VK_STRUCTURE_TYPE_COMPUTE_PIPELINE_CREATE_INFO,
-            .stage = { .sType = VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO, .stage = VK_SHADER_STAGE_COMPUTE_BIT,
-                       .module = module, .pName = "main" },
-            .layout = layout,
-        };
-        ok = ok && vkCreateComputePipelines(vk->device, VK_NULL_HANDLE, 1, &ci, NULL, &pipeline) == VK_SUCCESS;
-        ok = ok && vkCreateDescriptorPool(vk->device, &pi, NULL, &pool) == VK_SUCCESS;
-        VkDescriptorSet set = VK_NULL_HANDLE;
-        VkDescriptorSetAllocateInfo ai = { .sType = VK_STRUCTURE_TYPE_DESCRIPTOR_SET_ALLOCATE_INFO, .descriptorPool = pool,
-                                           .descriptorSetCount = 1, .pSetLayouts = &set_layout };
-        ok = ok && vkAllocateDescriptorSets(vk->device, &ai, &set) == VK_SUCCESS;
-        CHECK(ok);
-        if (ok) {
-            VkDescriptorBufferInfo bi[5] = { { in[0].buffer, 0, VK_WHOLE_SIZE }, { in[1].buffer, 0, VK_WHOLE_SIZE },
-                                             { in[2].buffer, 0, VK_WHOLE_SIZE }, { out.buffer, 0, VK_WHOLE_SIZE },
-                                             { in[3].buffer, 0, VK_WHOLE_SIZE } };
-            VkWriteDescriptorSet w[5];
-            for (uint32_t i = 0; i < 5; i++)
-                w[i] = (VkWriteDescriptorSet){ .sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET, .dstSet = set, .dstBinding = i,
-                                               .descriptorCount = 1, .descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER,
-                                               .pBufferInfo = &bi[i] };
-            vkUpdateDescriptorSets(vk->device, 5, w, 0, NULL);
-            VkCommandBuffer cmd;
-            CHECK(vk_commands_begin(vk, &cmd) == VKRT_OK);
-            vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline);
-            vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, layout, 0, 1, &set, 0, NULL);
-            vkCmdPushConstants(cmd, layout, VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof push, &push);
-            vkCmdDispatch(cmd, 1, 1, 1);
-            /* The host reads what the shader wrote. */
-            VkMemoryBarrier to_host = { .sType = VK_STRUCTURE_TYPE_MEMORY_BARRIER, .srcAccessMask = VK_ACCESS_SHADER_WRITE_BIT,
-                                        .dstAccessMask = VK_ACCESS_HOST_READ_BIT };
-            vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_PIPELINE_STAGE_HOST_BIT, 0, 1, &to_host, 0,
-                                 NULL, 0, NULL);
-            CHECK(vk_commands_submit_wait(vk, cmd) == VKRT_OK);
-            CHECK(vk_buffer_invalidate(vk, &out) == VKRT_OK);
-            const uint32_t *got = out.mapped;
-            for (size_t i = 0; i < words; i++)
-                CHECK_MSG(got[i] == expected[i], "word %zu: shader read 0x%08x, C wrote 0x%08x", i, got[i], expected[i]);
+        const uint32_t *got = buffers[3].mapped;
+        for (size_t i = 0; i < words; i++)
+            CHECK_MSG(got[i] == expected[i], "word %zu: shader read 0x%08x, C wrote 0x%08x", i, got[i], expected[i]);
+    }
+    for (int i = 0; i < 7; i++) vk_buffer_destroy(gpu->vk, &buffers[i]);
+}
+
+/* ray_offset() in GLSL against the C function, bit for bit, on hit points from 1e-30 to 1e30,
+ * zero and negative coordinates, points on both sides of the float/integer switch, and unit
+ * normals in every octant and along the axes. */
+static void gpu_ray_offset_matches_c(void)
+{
+    enum { CASES = 4096 };
+    float *inputs = malloc(CASES * 6 * sizeof *inputs);
+    if (!inputs) abort();
+    test_rng rng = { 2024 };
+    for (size_t i = 0; i < CASES; i++) {
+        double n[3];
+        rng_unit_vector(&rng, n);
+        if (i % 16 == 0) n[0] = n[1] = n[2] = 0.0, n[i / 16 % 3] = (i / 48) % 2 ? -1.0 : 1.0;
+        for (int a = 0; a < 3; a++) {
+            double magnitude = pow(10.0, 60.0 * rng_uniform(&rng) - 30.0);
+            if (i % 7 == 0) magnitude = VKRT_OFFSET_ORIGIN * (0.5 + rng_uniform(&rng)); /* around the switch */
+            if (i % 11 == (size_t)a) magnitude = 0.0;
+            inputs[i * 6 + a] = (float)(rng_uniform(&rng) < 0.5 ? -magnitude : magnitude);
+            inputs[i * 6 + 3 + a] = (float)n[a];
         }
     }
-    if (pool) vkDestroyDescriptorPool(vk->device, pool, NULL);
-    if (pipeline) vkDestroyPipeline(vk->device, pipeline, NULL);
-    if (module) vkDestroyShaderModule(vk->device, module, NULL);
-    if (layout) vkDestroyPipelineLayout(vk->device, layout, NULL);
-    if (set_layout) vkDestroyDescriptorSetLayout(vk->device, set_layout, NULL);
-    core_free(vk->core, spirv);
-    for (int i = 0; i < 4; i++) vk_buffer_destroy(vk, &in[i]);
-    vk_buffer_destroy(vk, &out);
+    vk_buffer buffers[2] = { 0 };
+    const void *data[2] = { inputs, NULL };
+    const size_t sizes[2] = { CASES * 6 * sizeof(float), CASES * 3 * sizeof(float) };
+    const uint32_t count = CASES;
+    bool ok = create_check_buffers(buffers, data, sizes, 2);
+    ok = ok && run_check_shader("offset_check.comp", vkrt_shader_offset_check_comp, buffers, 2, &count, sizeof count,
+                                (CASES + 63) / 64);
+    if (ok) {
+        const float *got = buffers[1].mapped;
+        size_t differ = 0, moved = 0;
+        for (size_t i = 0; i < CASES; i++) {
+            const float *in = inputs + i * 6;
+            vkrt_float3 want = ray_offset((vkrt_float3){ in[0], in[1], in[2] }, (vkrt_float3){ in[3], in[4], in[5] });
+            const float w[3] = { want.x, want.y, want.z };
+            for (int a = 0; a < 3; a++) {
+                moved += w[a] != in[a];
+                if (memcmp(&w[a], &got[i * 3 + a], sizeof(float)) != 0 && differ++ < 5)
+                    fprintf(stderr, "  case %zu axis %d: p %.9g n %.9g: C %.9g, GLSL %.9g\n", i, a, (double)in[a],
+                            (double)in[3 + a], (double)w[a], (double)got[i * 3 + a]);
+            }
+        }
+        fprintf(stderr, "  %d cases: %zu coordinates moved by the offset, %zu differ between C and GLSL\n", CASES, moved,
+                differ);
+        CHECK_MSG(differ == 0, "%zu offset coordinates differ between GLSL and C", differ);
+        CHECK_MSG(moved > CASES, "the offset moved only %zu coordinates", moved);
+    }
+    for (int i = 0; i < 2; i++) vk_buffer_destroy(gpu->vk, &buffers[i]);
+    free(inputs);
 }
 
 /* The detector behind every other test: a deliberate misuse (a buffer with no usage flags,
@@ -425,9 +511,176 @@ static void gpu_watertight_never_misses_shared_edges_and_vertices(void)
     check_watertight_on(gpu, VKRT_PRECISION_FLOAT, "gpu");
 }
 
+static void gpu_grazing_hit_distances_are_exact(void)
+{
+    check_grazing_distances_on(gpu, cpu, "gpu");
+}
+
 static void gpu_secondary_rays_never_rehit_their_own_triangle(void)
 {
     check_no_self_intersection_on(gpu, "gpu");
+}
+
+/* ---- traversals longer than lavapipe's loop limit (65,535 iterations per SIMD group) ---- */
+
+/* A scene of its own positions and indices, in world coordinates. */
+static vkrt_scene *mesh_scene(vkrt_context *ctx, const float *pos, uint32_t vertices, const uint32_t *idx,
+                              uint32_t tris, vkrt_bvh_builder builder)
+{
+    vkrt_mesh_desc md = { .positions = pos, .vertex_count = vertices, .indices = idx, .index_count = tris * 3 };
+    vkrt_scene *s = NULL;
+    vkrt_result r = vkrt_scene_create(
+        ctx, &(vkrt_scene_desc){ .meshes = &md, .mesh_count = 1, .keep_world_coordinates = true, .builder = builder },
+        &s);
+    CHECK_MSG(r == VKRT_OK, "in-memory scene: %s", vkrt_context_last_error(ctx));
+    return s;
+}
+
+enum { FAN_TRIS = 100000, STACK_TRIS = 70000, LONG_RAYS = 48 };
+
+/* FAN_TRIS triangles around the origin (the disc of radius 1 in z = 0): every box holds the
+ * shared vertex, so a ray through it tests nearly every triangle. */
+static void make_fan(float **out_pos, uint32_t **out_idx)
+{
+    float *pos = malloc((FAN_TRIS + 1) * 3 * sizeof *pos);
+    uint32_t *idx = malloc(FAN_TRIS * 3 * sizeof *idx);
+    if (!pos || !idx) abort();
+    pos[0] = pos[1] = pos[2] = 0.0f;
+    for (uint32_t i = 0; i < FAN_TRIS; i++) {
+        double a = 6.283185307179586 * i / FAN_TRIS;
+        pos[3 + i * 3] = (float)cos(a), pos[4 + i * 3] = (float)sin(a), pos[5 + i * 3] = 0.0f;
+        idx[i * 3] = 0, idx[i * 3 + 1] = 1 + i, idx[i * 3 + 2] = 1 + (i + 1) % FAN_TRIS;
+    }
+    *out_pos = pos;
+    *out_idx = idx;
+}
+
+/* STACK_TRIS triangles (-1, -1, d), (1, -1, -d), (0, 2, 0), d = k / 2^17: the same box centre
+ * and the same vertex sum, so every builder makes them one leaf, and z = -d x, so a ray down
+ * at x < 0 is nearest to the last triangle. */
+static void make_leaf_stack(float **out_pos, uint32_t **out_idx)
+{
+    float *pos = malloc(STACK_TRIS * 9 * sizeof *pos);
+    uint32_t *idx = malloc(STACK_TRIS * 3 * sizeof *idx);
+    if (!pos || !idx) abort();
+    for (uint32_t k = 0; k < STACK_TRIS; k++) {
+        float d = (float)k / 131072.0f;
+        const float v[9] = { -1, -1, d, 1, -1, -d, 0, 2, 0 };
+        memcpy(pos + k * 9, v, sizeof v);
+        for (uint32_t j = 0; j < 3; j++) idx[k * 3 + j] = k * 3 + j;
+    }
+    *out_pos = pos;
+    *out_idx = idx;
+}
+
+/* Every ray hits on the GPU, and where `exact`, with the CPU's t and prim_id bit for bit. */
+static void check_long_rays(vkrt_scene *sg, vkrt_scene *sc, vkrt_intersector isect, bool exact, const vkrt_ray *rays,
+                            size_t n, const char *what)
+{
+    vkrt_trace_desc d = { .intersector = isect };
+    vkrt_hit *g = trace_all(gpu, sg, &d, rays, n), *c = trace_all(cpu, sc, &d, rays, n);
+    size_t same = 0, hits = 0;
+    for (size_t i = 0; i < n; i++) {
+        same += g[i].prim_id == c[i].prim_id && memcmp(&g[i].t, &c[i].t, sizeof g[i].t) == 0;
+        hits += g[i].prim_id != VKRT_NO_HIT;
+    }
+    fprintf(stderr, "  %s: %zu of %zu rays hit, %zu equal the CPU's\n", what, hits, n, same);
+    CHECK_MSG(hits == n, "%s: %zu of %zu rays miss on the GPU", what, n - hits, n);
+    CHECK_MSG(!exact || same == n, "%s: GPU hits equal the CPU's for %zu of %zu rays", what, same, n);
+    free(g);
+    free(c);
+}
+
+/* Rays aimed exactly at the fan's shared vertex and down through the stacked leaf need over
+ * 65,535 loop iterations each: on lavapipe the traversal stops at its budget and is resumed
+ * by further dispatches, and the hits (t and prim_id) still equal the CPU's, with both
+ * builders. Without the budget lavapipe ends the loops early and the hits differ. (GPU BVH
+ * against GPU naive is no check here: through the vertex, triangle t and box t round
+ * differently, so a box may be pruned whose triangle would win the tie by an ulp.) */
+static void gpu_traversals_beyond_the_loop_limit_match_cpu(void)
+{
+    float *fan_pos, *stack_pos;
+    uint32_t *fan_idx, *stack_idx;
+    make_fan(&fan_pos, &fan_idx);
+    make_leaf_stack(&stack_pos, &stack_idx);
+    vkrt_ray fan_rays[LONG_RAYS], stack_rays[LONG_RAYS];
+    test_rng rng = { 77 };
+    for (int i = 0; i < LONG_RAYS; i++) {
+        double d[3];
+        do rng_unit_vector(&rng, d);
+        while (fabs(d[2]) < 0.2);
+        /* dir = -origin exactly, so the ray passes through the vertex at t = 1. */
+        fan_rays[i] = (vkrt_ray){ .origin = { (float)(2 * d[0]), (float)(2 * d[1]), (float)(2 * d[2]) } };
+        for (int a = 0; a < 3; a++) fan_rays[i].dir[a] = -fan_rays[i].origin[a];
+        stack_rays[i] = (vkrt_ray){ .origin = { (float)(-0.45 + 0.4 * rng_uniform(&rng)), (float)(rng_uniform(&rng) - 0.5), 2 },
+                                    .dir = { 0, 0, -1 } };
+    }
+    const vkrt_bvh_builder builders[2] = { VKRT_BVH_BUILDER_BINNED_SAH, VKRT_BVH_BUILDER_MIDPOINT };
+    for (int k = 0; k < 2; k++) {
+        const vkrt_bvh_builder b = builders[k];
+        const char *name = b == VKRT_BVH_BUILDER_MIDPOINT ? "midpoint" : "sah";
+        char what[80];
+        vkrt_scene *sg = mesh_scene(gpu, fan_pos, FAN_TRIS + 1, fan_idx, FAN_TRIS, b);
+        vkrt_scene *sc = mesh_scene(cpu, fan_pos, FAN_TRIS + 1, fan_idx, FAN_TRIS, b);
+        /* Through the vertex every edge value is zero, where the CPU's float watertight test
+         * decides in double and the GPU's accepts, so only Moller-Trumbore (the same float
+         * arithmetic on both) must give the CPU's hits bit for bit; watertight must not leak. */
+        snprintf(what, sizeof what, "fan-%d, %s, watertight", FAN_TRIS, name);
+        if (sg && sc) check_long_rays(sg, sc, VKRT_INTERSECTOR_WATERTIGHT, false, fan_rays, LONG_RAYS, what);
+        snprintf(what, sizeof what, "fan-%d, %s, mt", FAN_TRIS, name);
+        if (sg && sc) check_long_rays(sg, sc, VKRT_INTERSECTOR_MOLLER_TRUMBORE, true, fan_rays, LONG_RAYS, what);
+        vkrt_scene_destroy(sg);
+        vkrt_scene_destroy(sc);
+        sg = mesh_scene(gpu, stack_pos, STACK_TRIS * 3, stack_idx, STACK_TRIS, b);
+        sc = mesh_scene(cpu, stack_pos, STACK_TRIS * 3, stack_idx, STACK_TRIS, b);
+        vkrt_scene_stats st = { 0 };
+        if (sg && vkrt_scene_stats_get(sg, &st) == VKRT_OK)
+            CHECK_MSG(st.max_leaf_triangles == STACK_TRIS, "%s: largest leaf %u, not all %d triangles", name,
+                      st.max_leaf_triangles, STACK_TRIS);
+        snprintf(what, sizeof what, "one leaf of %d, %s", STACK_TRIS, name);
+        if (sg && sc) check_long_rays(sg, sc, VKRT_INTERSECTOR_WATERTIGHT, true, stack_rays, LONG_RAYS, what);
+        vkrt_scene_destroy(sg);
+        vkrt_scene_destroy(sc);
+    }
+    free(fan_pos);
+    free(fan_idx);
+    free(stack_pos);
+    free(stack_idx);
+}
+
+/* The stacked leaf seen from above: every pixel's ray tests all STACK_TRIS triangles of the
+ * one leaf, so on lavapipe every pixel is saved and resumed, twice. id, depth and the
+ * triangles-tested heatmap equal the CPU's pixel for pixel: the closest hit and the heat
+ * counters survive the continuation. */
+static void gpu_image_beyond_the_loop_limit_matches_cpu(void)
+{
+    float *pos;
+    uint32_t *idx;
+    make_leaf_stack(&pos, &idx);
+    vkrt_scene *sg = mesh_scene(gpu, pos, STACK_TRIS * 3, idx, STACK_TRIS, VKRT_BVH_BUILDER_DEFAULT);
+    vkrt_scene *sc = mesh_scene(cpu, pos, STACK_TRIS * 3, idx, STACK_TRIS, VKRT_BVH_BUILDER_DEFAULT);
+    const uint32_t w = 9, h = 7;
+    const vkrt_mode modes[3] = { VKRT_MODE_ID, VKRT_MODE_DEPTH, VKRT_MODE_HEATMAP };
+    for (int m = 0; sg && sc && m < 3; m++) {
+        vkrt_render_desc d = { .width = w, .height = h, .mode = modes[m], .heat = VKRT_HEAT_TRIS,
+                               .camera = { .eye = { -0.2f, 0, 3 }, .target = { -0.2f, 0, 0 }, .fov_y_degrees = 10 } };
+        float *g = render(gpu, sg, &d), *c = render(cpu, sc, &d);
+        size_t same = 0, long_rays = 0;
+        for (size_t i = 0; g && c && i < (size_t)w * h; i++) {
+            same += memcmp(g + i * 4, c + i * 4, 4 * sizeof *g) == 0;
+            long_rays += g[i * 4] == (float)STACK_TRIS;
+        }
+        CHECK_MSG(same == (size_t)w * h, "mode %d: %zu of %u pixels equal the CPU's", (int)modes[m], same, w * h);
+        if (modes[m] == VKRT_MODE_HEATMAP)
+            CHECK_MSG(long_rays == (size_t)w * h, "only %zu of %u pixels test all %d triangles", long_rays, w * h,
+                      STACK_TRIS);
+        free(g);
+        free(c);
+    }
+    vkrt_scene_destroy(sg);
+    vkrt_scene_destroy(sc);
+    free(pos);
+    free(idx);
 }
 
 /* Double precision is the CPU reference's alone: the GPU refuses it with a message saying so. */
@@ -472,6 +725,7 @@ int main(void)
 
     RUN(gpu_validation_messages_are_counted);
     RUN(gpu_shared_layouts_match_c);
+    RUN(gpu_ray_offset_matches_c);
     RUN(gpu_every_pipeline_variant_runs);
     RUN(gpu_matches_cpu_reference);
     RUN(gpu_tiles_are_seamless);
@@ -484,7 +738,10 @@ int main(void)
     RUN(gpu_trace_rays_match_cpu_and_naive);
     RUN(gpu_watertight_never_misses_shared_edges_and_vertices);
     RUN(gpu_eye_inside_a_closed_mesh_always_hits);
+    RUN(gpu_grazing_hit_distances_are_exact);
     RUN(gpu_secondary_rays_never_rehit_their_own_triangle);
+    RUN(gpu_traversals_beyond_the_loop_limit_match_cpu);
+    RUN(gpu_image_beyond_the_loop_limit_matches_cpu);
 
     CHECK_EQ_U64(vkrt_context_validation_messages(gpu), 0);
     vkrt_context_destroy(gpu);

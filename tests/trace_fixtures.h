@@ -432,4 +432,56 @@ static inline void check_no_self_intersection_on(vkrt_context *ctx, const char *
     fprintf(stderr, "  %s: %zu secondary rays, %zu hit their own triangle\n", label, total_spawned, self_hits);
 }
 
+/* Rays grazing one large triangle in the plane y = 0 at 1e-1 ... 1e-4 radians: the float
+ * edge functions lose digits to cancellation there, so the reported distance is refined in
+ * double (refine_hit_distance): it must be the exact distance of that float ray rounded once,
+ * within one float ulp of the double reference traced from the same rays (`reference`, a CPU
+ * context). Both intersectors. */
+static inline void check_grazing_distances_on(vkrt_context *ctx, vkrt_context *reference, const char *label)
+{
+    static const float pos[9] = { -100.0f, 0.0f, -100.0f, 0.0f, 0.0f, 200.0f, 100.0f, 0.0f, -100.0f };
+    vkrt_mesh_desc md = { .positions = pos, .vertex_count = 3 };
+    vkrt_scene_desc sd = { .meshes = &md, .mesh_count = 1, .keep_world_coordinates = true };
+    vkrt_scene *s = NULL, *ref = NULL;
+    CHECK_MSG(vkrt_scene_create(ctx, &sd, &s) == VKRT_OK, "%s: %s", label, vkrt_context_last_error(ctx));
+    CHECK_MSG(vkrt_scene_create(reference, &sd, &ref) == VKRT_OK, "reference: %s", vkrt_context_last_error(reference));
+    enum { N = 4000 };
+    vkrt_ray *rays = calloc(N, sizeof *rays);
+    if (!rays) abort();
+    test_rng rng = { 777 };
+    for (size_t i = 0; i < N; i++) {
+        double angle = pow(10.0, -1.0 - 3.0 * rng_uniform(&rng)), phi = 6.283185307179586 * rng_uniform(&rng);
+        double distance = 1.0 + 9.0 * rng_uniform(&rng); /* from origin to the hit */
+        double hit[3] = { 4.0 * (rng_uniform(&rng) - 0.5), 0.0, 4.0 * (rng_uniform(&rng) - 0.5) };
+        double dir[3] = { cos(angle) * cos(phi), -sin(angle), cos(angle) * sin(phi) };
+        rays[i] = (vkrt_ray){ .origin = { (float)(hit[0] - distance * dir[0]), (float)(hit[1] - distance * dir[1]),
+                                          (float)(hit[2] - distance * dir[2]) },
+                              .dir = { (float)dir[0], (float)dir[1], (float)dir[2] } };
+    }
+    for (int isect = VKRT_INTERSECTOR_WATERTIGHT; s && ref && isect <= VKRT_INTERSECTOR_MOLLER_TRUMBORE; isect++) {
+        vkrt_trace_desc d = { .intersector = (vkrt_intersector)isect };
+        vkrt_trace_desc dd = { .intersector = (vkrt_intersector)isect, .precision = VKRT_PRECISION_DOUBLE };
+        vkrt_hit *h = trace_all(ctx, s, &d, rays, N), *hd = trace_all(reference, ref, &dd, rays, N);
+        size_t both = 0, beyond = 0;
+        double max_rel = 0;
+        for (size_t i = 0; i < N; i++) {
+            if (h[i].prim_id == VKRT_NO_HIT || hd[i].prim_id == VKRT_NO_HIT) continue;
+            both++;
+            double rel = fabs((double)h[i].t - (double)hd[i].t) / (double)hd[i].t;
+            max_rel = fmax(max_rel, rel);
+            beyond += rel > 0x1p-23;
+        }
+        fprintf(stderr, "  %s isect %d: %zu of %d grazing rays hit on both, max relative t error %.3g\n", label, isect,
+                both, N, max_rel);
+        CHECK_MSG(both >= N - N / 1000, "%s isect %d: only %zu of %d grazing rays hit", label, isect, both, N);
+        CHECK_MSG(beyond == 0, "%s isect %d: %zu grazing distances off by more than one float ulp (max %.3g)", label,
+                  isect, beyond, max_rel);
+        free(h);
+        free(hd);
+    }
+    free(rays);
+    vkrt_scene_destroy(s);
+    vkrt_scene_destroy(ref);
+}
+
 #endif
