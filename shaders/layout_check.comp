@@ -13,6 +13,7 @@ layout(std430, set = 0, binding = 3) writeonly buffer Words { uint words[]; };
 layout(std430, set = 0, binding = 4) readonly buffer Rays { vkrt_gpu_ray rays[]; };
 layout(std430, set = 0, binding = 5) readonly buffer Resume { vkrt_gpu_resume states[]; };
 layout(std430, set = 0, binding = 6) readonly buffer ResumeStack { vkrt_gpu_stack_entry entries[]; };
+layout(std430, set = 0, binding = 7) readonly buffer Counters { vkrt_gpu_counters counters[]; };
 layout(push_constant) uniform PushBlock { vkrt_gpu_push p; };
 
 uint k = 0;
@@ -40,4 +41,6 @@ void main()
     put(s.pad2);
     vkrt_gpu_stack_entry e = entries[1];
     put(e.node); put(e.tnear);
+    vkrt_gpu_counters c = counters[1];
+    put(c.nodes); put(c.leaves); put(c.tris); put(c.pad0);
 }

@@ -17,6 +17,7 @@ layout(constant_id = VKRT_SPEC_HEAT) const uint HEAT = VKRT_GPU_HEAT_NODES;
 layout(constant_id = VKRT_SPEC_RAYGEN) const uint RAYGEN = VKRT_GPU_RAYGEN_CAMERA;
 layout(constant_id = VKRT_SPEC_ISECT) const uint ISECT = VKRT_GPU_ISECT_WATERTIGHT;
 layout(constant_id = VKRT_SPEC_BUDGET) const uint BUDGET = 0u;
+layout(constant_id = VKRT_SPEC_COUNTERS) const uint COUNTERS = 0u;
 
 layout(set = 0, binding = VKRT_BINDING_NODES, std430) readonly buffer Nodes {
     vkrt_gpu_node nodes[];
@@ -45,6 +46,10 @@ layout(set = 0, binding = VKRT_BINDING_RESUME_STACK, std430) buffer ResumeStack 
 };
 layout(set = 0, binding = VKRT_BINDING_UNFINISHED, std430) buffer Unfinished {
     uint unfinished;
+};
+/* With COUNTERS: what each pixel's traversal did, summed by the host (render statistics). */
+layout(set = 0, binding = VKRT_BINDING_COUNTERS, std430) writeonly buffer Counters {
+    vkrt_gpu_counters counters[];
 };
 layout(push_constant, std430) uniform Push {
     vkrt_gpu_push p;
@@ -330,6 +335,7 @@ void main()
     if (already_finished(slot)) return;
     ray r = camera_ray(p, x, y);
     if (trace_bvh(r, slot, best, heat)) {
+        if (COUNTERS != 0u) counters[slot] = vkrt_gpu_counters(heat.nodes, heat.leaves, heat.tris, 0u);
         finish_pixel_hit(x, y, best);
         imageStore(out_image, ivec2(local), shade(best, heat));
     }

@@ -37,6 +37,7 @@ typedef struct vkrt_float3 { float x, y, z; } vkrt_float3;
 #define VKRT_BINDING_RESUME 5          /* vkrt_gpu_resume per pixel of a tile / ray of a chunk */
 #define VKRT_BINDING_RESUME_STACK 6    /* VKRT_TRAVERSAL_STACK_SIZE vkrt_gpu_stack_entry per slot */
 #define VKRT_BINDING_UNFINISHED 7      /* one uint: invocations that stopped at the budget */
+#define VKRT_BINDING_COUNTERS 8        /* vkrt_gpu_counters per pixel of a tile (VKRT_SPEC_COUNTERS) */
 
 /* Specialization constant ids: features a render does not use are compiled out instead of
  * branched over (lavapipe pays nearly full price for an `if` that is false everywhere). */
@@ -46,6 +47,7 @@ typedef struct vkrt_float3 { float x, y, z; } vkrt_float3;
 #define VKRT_SPEC_RAYGEN 3
 #define VKRT_SPEC_ISECT 4
 #define VKRT_SPEC_BUDGET 5 /* BVH loop iterations per dispatch; 0 = unlimited (no budget code) */
+#define VKRT_SPEC_COUNTERS 6 /* 1: each pixel's traversal counts written out; 0: no counting code */
 
 /* Values of the specialization constants; the C side asserts they equal the public enums. */
 #define VKRT_GPU_MODE_NORMAL 1
@@ -167,6 +169,16 @@ VKRT_STRUCT(vkrt_gpu_resume) {
     VKRT_UINT pad2;        /* offset 60 */
 };
 
+/* What one primary ray's BVH traversal did (VKRT_SPEC_COUNTERS), 16 bytes: the boxes it
+ * entered (the root's included), how many of those were leaves, and its ray-triangle tests:
+ * the heat map's three counts. */
+VKRT_STRUCT(vkrt_gpu_counters) {
+    VKRT_UINT nodes;       /* offset  0 */
+    VKRT_UINT leaves;      /* offset  4 */
+    VKRT_UINT tris;        /* offset  8 */
+    VKRT_UINT pad0;        /* offset 12 */
+};
+
 /* One saved traversal stack entry, 8 bytes: a pushed node and the distance its box starts. */
 VKRT_STRUCT(vkrt_gpu_stack_entry) {
     VKRT_UINT node;        /* offset  0 */
@@ -228,6 +240,7 @@ _Static_assert(offsetof(vkrt_gpu_resume, heat_tris) == 48, "vkrt_gpu_resume.heat
 _Static_assert(sizeof(vkrt_gpu_stack_entry) == 8, "vkrt_gpu_stack_entry must match std430");
 _Static_assert(offsetof(vkrt_gpu_stack_entry, tnear) == 4, "vkrt_gpu_stack_entry.tnear must match std430");
 _Static_assert(VKRT_NAIVE_CHUNK_TRIS <= VKRT_LAVAPIPE_BUDGET, "a naive chunk's loop must fit lavapipe's loop limit");
+_Static_assert(sizeof(vkrt_gpu_counters) == 16, "vkrt_gpu_counters must match std430");
 _Static_assert(sizeof(vkrt_gpu_push) == 96, "vkrt_gpu_push must match the push-constant range");
 _Static_assert(offsetof(vkrt_gpu_push, right) == 16, "vkrt_gpu_push.right must match std430");
 _Static_assert(offsetof(vkrt_gpu_push, up) == 32, "vkrt_gpu_push.up must match std430");

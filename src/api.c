@@ -291,12 +291,13 @@ vkrt_result vkrt_render(vkrt_context *ctx, vkrt_scene *scene, const vkrt_render_
 
     double t0 = core_now_ms();
     double trace_ms = 0.0;
+    trace_counts counts = { 0 };
     if (ctx->vk) {
         gpu_trace_params p = {
             .camera = camera, .mode = mode, .traversal = traversal, .heat = heat, .intersector = d.intersector,
-            .progress = d.progress, .progress_user = d.progress_user,
+            .counters = d.traversal_counters, .progress = d.progress, .progress_user = d.progress_user,
         };
-        r = gpu_trace_render(ctx->vk, &scene->gpu, &p, out_rgba, &trace_ms);
+        r = gpu_trace_render(ctx->vk, &scene->gpu, &p, out_rgba, &trace_ms, &counts);
     } else {
         cpu_trace_scene s = {
             .nodes = scene->bvh.nodes, .node_count = scene->bvh.node_count,
@@ -304,16 +305,19 @@ vkrt_result vkrt_render(vkrt_context *ctx, vkrt_scene *scene, const vkrt_render_
         };
         cpu_trace_params p = {
             .camera = camera, .mode = mode, .traversal = traversal, .heat = heat, .intersector = d.intersector,
-            .precision = d.precision, .camera_d = camera_d, .threads = ctx->cpu_threads,
-            .progress = d.progress, .progress_user = d.progress_user,
+            .precision = d.precision, .camera_d = camera_d, .counters = d.traversal_counters,
+            .threads = ctx->cpu_threads, .progress = d.progress, .progress_user = d.progress_user,
         };
-        r = cpu_trace_render(c, &s, &p, out_rgba);
+        r = cpu_trace_render(c, &s, &p, out_rgba, &counts);
         trace_ms = core_now_ms() - t0;
     }
     if (r == VKRT_OK && out_stats) {
         out_stats->trace_ms = trace_ms;
         out_stats->total_ms = core_now_ms() - t0;
         out_stats->rays = (uint64_t)d.width * d.height;
+        out_stats->nodes_visited = counts.nodes;
+        out_stats->leaves_visited = counts.leaves;
+        out_stats->tris_tested = counts.tris;
     }
     return r;
 }

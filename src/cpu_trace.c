@@ -133,6 +133,7 @@ struct job {
     camera_d cam_d;
     float *out;
     uint32_t tiles_x;
+    atomic_uint_fast64_t count_nodes, count_leaves, count_tris; /* params->counters */
     /* rays */
     const cpu_trace_rays_params *rays_params;
     const vkrt_ray *rays;
@@ -140,7 +141,8 @@ struct job {
     vkrt_hit *hits;
 };
 
-static void trace_pixel(const job *j, uint32_t x, uint32_t y, float out[4])
+/* Traces pixel (x, y) into out and adds its traversal counts to *counts. */
+static void trace_pixel(const job *j, uint32_t x, uint32_t y, float out[4], trace_counts *counts)
 {
     const cpu_trace_scene *s = j->scene;
     const cpu_trace_params *p = j->params;
@@ -162,6 +164,9 @@ static void trace_pixel(const job *j, uint32_t x, uint32_t y, float out[4])
         }
     }
     shade(s, p, &best, &heat, out);
+    counts->nodes += heat.nodes;
+    counts->leaves += heat.leaves;
+    counts->tris += heat.tris;
 }
 
 static bool run_tile(job *j, size_t t)
@@ -169,10 +174,16 @@ static bool run_tile(job *j, size_t t)
     const uint32_t width = j->params->camera.width, height = j->params->camera.height;
     uint32_t x0 = (uint32_t)(t % j->tiles_x) * TILE, y0 = (uint32_t)(t / j->tiles_x) * TILE;
     uint32_t x1 = x0 + TILE < width ? x0 + TILE : width, y1 = y0 + TILE < height ? y0 + TILE : height;
+    trace_counts counts = { 0 };
     for (uint32_t y = y0; y < y1; y++) {
         /* Checked per row so a cancel stops a slow (naive, large) tile early. */
         if (atomic_load_explicit(&j->cancel, memory_order_relaxed)) return false;
-        for (uint32_t x = x0; x < x1; x++) trace_pixel(j, x, y, j->out + ((size_t)y * width + x) * 4);
+        for (uint32_t x = x0; x < x1; x++) trace_pixel(j, x, y, j->out + ((size_t)y * width + x) * 4, &counts);
+    }
+    if (j->params->counters) {
+        atomic_fetch_add_explicit(&j->count_nodes, counts.nodes, memory_order_relaxed);
+        atomic_fetch_add_explicit(&j->count_leaves, counts.leaves, memory_order_relaxed);
+        atomic_fetch_add_explicit(&j->count_tris, counts.tris, memory_order_relaxed);
     }
     return true;
 }
@@ -265,7 +276,8 @@ static vkrt_result run_job(core *c, job *j, uint32_t threads, vkrt_progress_fn p
     return r;
 }
 
-vkrt_result cpu_trace_render(core *c, const cpu_trace_scene *scene, const cpu_trace_params *params, float *out_rgba)
+vkrt_result cpu_trace_render(core *c, const cpu_trace_scene *scene, const cpu_trace_params *params, float *out_rgba,
+                             trace_counts *out_counts)
 {
     const uint32_t width = params->camera.width, height = params->camera.height;
     const vkrt_gpu_push *p = &params->camera;
@@ -281,7 +293,12 @@ vkrt_result cpu_trace_render(core *c, const cpu_trace_scene *scene, const cpu_tr
     };
     j.tiles_x = (width + TILE - 1) / TILE;
     j.items = (size_t)j.tiles_x * ((height + TILE - 1) / TILE);
-    return run_job(c, &j, params->threads, params->progress, params->progress_user);
+    atomic_init(&j.count_nodes, 0);
+    atomic_init(&j.count_leaves, 0);
+    atomic_init(&j.count_tris, 0);
+    vkrt_result r = run_job(c, &j, params->threads, params->progress, params->progress_user);
+    *out_counts = (trace_counts){ atomic_load(&j.count_nodes), atomic_load(&j.count_leaves), atomic_load(&j.count_tris) };
+    return r;
 }
 
 vkrt_result cpu_trace_rays(core *c, const cpu_trace_scene *scene, const cpu_trace_rays_params *params,

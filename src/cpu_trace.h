@@ -8,6 +8,7 @@
 #include "../shaders/vkrt_shared.h"
 #include "camera.h"
 #include "core.h"
+#include "trace_counts.h"
 
 typedef struct cpu_trace_scene {
     const vkrt_gpu_node *nodes;
@@ -24,16 +25,19 @@ typedef struct cpu_trace_params {
     vkrt_heat heat;             /* resolved */
     vkrt_intersector intersector; /* _DEFAULT: watertight */
     vkrt_precision precision;   /* _DEFAULT: float */
-    camera_basis camera_d;      /* camera_setup_double: double traces from it; float refines its hit distances with it */
+    camera_basis camera_d;      /* camera_setup_double: double traces from it; float refines its
+                                   hit distances with it */
+    bool counters;              /* fill *out_counts */
     uint32_t threads;           /* >= 1 */
     vkrt_progress_fn progress;  /* may be NULL; called from the calling thread */
     void *progress_user;
 } cpu_trace_params;
 
-/* Writes width * height * 4 floats to out_rgba. Returns VKRT_OK, VKRT_ERROR_CANCELLED, or
+/* Writes width * height * 4 floats to out_rgba, and the traversal counters to *out_counts
+ * (zero unless params->counters). Returns VKRT_OK, VKRT_ERROR_CANCELLED, or
  * VKRT_ERROR_OUT_OF_MEMORY / a thread-creation failure as VKRT_ERROR_LIMIT. */
 vkrt_result cpu_trace_render(core *c, const cpu_trace_scene *scene, const cpu_trace_params *params,
-                             float *out_rgba);
+                             float *out_rgba, trace_counts *out_counts);
 
 typedef struct cpu_trace_rays_params {
     vkrt_traversal traversal;     /* resolved */

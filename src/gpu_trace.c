@@ -68,6 +68,7 @@ typedef struct render_objects {
     vk_buffer resume;
     vk_buffer resume_stack;
     vk_buffer unfinished; /* host-visible: read after every submission */
+    vk_buffer counters;   /* host-visible: vkrt_gpu_counters per pixel of a tile, when counting */
     VkDescriptorPool pool;
     VkDescriptorSet set;
     VkQueryPool queries;
@@ -86,6 +87,7 @@ static void render_objects_destroy(vk_context *vk, render_objects *o)
     vk_buffer_destroy(vk, &o->resume);
     vk_buffer_destroy(vk, &o->resume_stack);
     vk_buffer_destroy(vk, &o->unfinished);
+    vk_buffer_destroy(vk, &o->counters);
 }
 
 static vkrt_result create_image(vk_context *vk, uint32_t w, uint32_t h, render_objects *o)
@@ -140,7 +142,7 @@ static vkrt_result create_descriptors(vk_context *vk, const gpu_scene *scene, Vk
                                       render_objects *o)
 {
     VkDescriptorPoolSize sizes[] = {
-        { VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 7 }, /* every binding but the image */
+        { VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 8 }, /* every binding but the image */
         { VK_DESCRIPTOR_TYPE_STORAGE_IMAGE, 1 },
     };
     VkDescriptorPoolCreateInfo pool_info = {
@@ -167,7 +169,7 @@ static vkrt_result create_descriptors(vk_context *vk, const gpu_scene *scene, Vk
         { VKRT_BINDING_NODES, scene->nodes.buffer },   { VKRT_BINDING_TRIS, scene->tris.buffer },
         { VKRT_BINDING_HITS, o->hits.buffer },         { VKRT_BINDING_RAYS, o->rays.buffer },
         { VKRT_BINDING_RESUME, o->resume.buffer },     { VKRT_BINDING_RESUME_STACK, o->resume_stack.buffer },
-        { VKRT_BINDING_UNFINISHED, o->unfinished.buffer },
+        { VKRT_BINDING_UNFINISHED, o->unfinished.buffer },    { VKRT_BINDING_COUNTERS, o->counters.buffer },
     };
     enum { BUFFERS = sizeof buffers / sizeof buffers[0] };
     VkDescriptorBufferInfo infos[BUFFERS];
@@ -188,10 +190,11 @@ static vkrt_result create_descriptors(vk_context *vk, const gpu_scene *scene, Vk
 
 /* Image mode: a tile_w x tile_h image, hit_count = pixels for naive traversal (else 1), no
  * rays. Ray mode: a 1x1 image (the layout has the binding), hit_count = ray_count rays.
- * resume_slots: continuation slots of budgeted BVH traversal (0: none needed). */
+ * resume_slots: continuation slots of budgeted BVH traversal (0: none needed); counter_slots:
+ * pixels whose traversal counters are written (0: not counting). */
 static vkrt_result create_render_objects(vk_context *vk, const gpu_scene *scene, VkDescriptorSetLayout layout,
                                          uint32_t tile_w, uint32_t tile_h, uint32_t hit_count, uint32_t ray_count,
-                                         uint32_t resume_slots, render_objects *o)
+                                         uint32_t resume_slots, uint32_t counter_slots, render_objects *o)
 {
     memset(o, 0, sizeof *o);
     vkrt_result r = create_image(vk, tile_w, tile_h, o);
@@ -221,6 +224,10 @@ static vkrt_result create_render_objects(vk_context *vk, const gpu_scene *scene,
     if (r == VKRT_OK)
         r = vk_buffer_create(vk, sizeof(uint32_t), VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT,
                              VK_MEMORY_READBACK, "vkrt unfinished count", &o->unfinished);
+    if (r == VKRT_OK)
+        r = vk_buffer_create(vk, (VkDeviceSize)(counter_slots ? counter_slots : 1) * sizeof(vkrt_gpu_counters),
+                             VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, VK_MEMORY_READBACK, "vkrt traversal counters",
+                             &o->counters);
     if (r == VKRT_OK) r = create_descriptors(vk, scene, layout, o);
     if (r == VKRT_OK && vk->timestamps) {
         VkQueryPoolCreateInfo q = {
@@ -398,9 +405,25 @@ static void record_tile(VkCommandBuffer cmd, const vk_trace_pipeline *pipe, cons
         .imageExtent = { push.tile_width, push.tile_height, 1 },
     };
     vkCmdCopyImageToBuffer(cmd, o->image, VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL, o->readback.buffer, 1, &region);
-    /* The host reads the readback buffer after the fence. */
+    /* The host reads the readback buffer, and the counters where the variant writes them,
+     * after the fence. */
     record_buffer_barrier(cmd, o->readback.buffer, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_WRITE_BIT,
                           VK_PIPELINE_STAGE_HOST_BIT, VK_ACCESS_HOST_READ_BIT);
+    record_buffer_barrier(cmd, o->counters.buffer, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_WRITE_BIT,
+                          VK_PIPELINE_STAGE_HOST_BIT, VK_ACCESS_HOST_READ_BIT);
+}
+
+/* Adds the counters of a finished tile's pixels to *sum. */
+static vkrt_result add_tile_counts(vk_context *vk, render_objects *o, uint32_t pixels, trace_counts *sum)
+{
+    vkrt_result r = vk_buffer_invalidate(vk, &o->counters);
+    const vkrt_gpu_counters *c = o->counters.mapped;
+    for (uint32_t i = 0; r == VKRT_OK && i < pixels; i++) {
+        sum->nodes += c[i].nodes;
+        sum->leaves += c[i].leaves;
+        sum->tris += c[i].tris;
+    }
+    return r;
 }
 
 static double tile_device_ms(vk_context *vk, const render_objects *o)
@@ -463,9 +486,10 @@ static vkrt_result run_passes(vk_context *vk, render_objects *o, const pass_desc
 }
 
 vkrt_result gpu_trace_render(vk_context *vk, const gpu_scene *scene, const gpu_trace_params *params,
-                             float *out_rgba, double *out_device_ms)
+                             float *out_rgba, double *out_device_ms, trace_counts *out_counts)
 {
     *out_device_ms = 0.0;
+    *out_counts = (trace_counts){ 0 };
     const uint32_t width = params->camera.width, height = params->camera.height;
     const bool naive = params->traversal == VKRT_TRAVERSAL_NAIVE;
     /* Naive traversal needs no budget: each chunk dispatch loops VKRT_NAIVE_CHUNK_TRIS times. */
@@ -476,6 +500,8 @@ vkrt_result gpu_trace_render(vk_context *vk, const gpu_scene *scene, const gpu_t
         .raygen = VKRT_GPU_RAYGEN_CAMERA,
         .isect = gpu_isect(params->intersector),
         .budget = naive ? 0 : vk->trace_budget,
+        /* Naive traversal's counts are known without tracing: no variant for them. */
+        .counters = params->counters && !naive,
     };
     /* Only heatmap reads the heat kind: other modes share one pipeline whatever it is. */
     if (variant.mode != VKRT_GPU_MODE_HEATMAP) variant.heat = VKRT_GPU_HEAT_NODES;
@@ -488,7 +514,7 @@ vkrt_result gpu_trace_render(vk_context *vk, const gpu_scene *scene, const gpu_t
     const uint32_t tile_h = height < TILE_SIZE ? height : TILE_SIZE;
     render_objects o;
     r = create_render_objects(vk, scene, pipe.set_layout, tile_w, tile_h, naive ? tile_w * tile_h : 1, 0,
-                              budget ? tile_w * tile_h : 0, &o);
+                              budget ? tile_w * tile_h : 0, variant.counters ? tile_w * tile_h : 0, &o);
     const uint32_t tiles_x = div_up(width, tile_w), tiles_y = div_up(height, tile_h);
     const uint32_t tiles = tiles_x * tiles_y;
     for (uint32_t t = 0; r == VKRT_OK && t < tiles; t++) {
@@ -509,12 +535,16 @@ vkrt_result gpu_trace_render(vk_context *vk, const gpu_scene *scene, const gpu_t
                                  .what = "render", .progress = params->progress,
                                  .progress_user = params->progress_user, .fraction = (float)t / (float)tiles };
         if ((r = run_passes(vk, &o, &pass, push, out_device_ms)) != VKRT_OK) break;
+        if (variant.counters &&
+            (r = add_tile_counts(vk, &o, push.tile_width * push.tile_height, out_counts)) != VKRT_OK)
+            break;
         const float *src = o.readback.mapped;
         for (uint32_t y = 0; y < push.tile_height; y++) {
             float *dst = out_rgba + ((size_t)(push.tile_y + y) * width + push.tile_x) * 4;
             memcpy(dst, src + (size_t)y * push.tile_width * 4, (size_t)push.tile_width * 4 * sizeof(float));
         }
     }
+    if (r == VKRT_OK && params->counters && naive) out_counts->tris = (uint64_t)scene->tri_count * width * height;
     if (r == VKRT_OK && params->progress) params->progress(params->progress_user, "trace", 1.0f);
     render_objects_destroy(vk, &o);
     return r;
@@ -572,7 +602,7 @@ vkrt_result gpu_trace_rays(vk_context *vk, const gpu_scene *scene, const gpu_tra
     const uint32_t max_chunk = budget ? VKRT_RESUME_RAY_CHUNK : VKRT_RAY_CHUNK;
     const uint32_t chunk = count < max_chunk ? (uint32_t)count : max_chunk;
     render_objects o;
-    r = create_render_objects(vk, scene, pipe.set_layout, 1, 1, chunk, chunk, budget ? chunk : 0, &o);
+    r = create_render_objects(vk, scene, pipe.set_layout, 1, 1, chunk, chunk, budget ? chunk : 0, 0, &o);
     const size_t chunks = (count + chunk - 1) / chunk;
     for (size_t k = 0; r == VKRT_OK && k < chunks; k++) {
         if (params->progress && !params->progress(params->progress_user, "trace", (float)k / (float)chunks)) {

@@ -5,6 +5,7 @@
 #define VKRT_GPU_TRACE_H
 
 #include "../shaders/vkrt_shared.h"
+#include "trace_counts.h"
 #include "vk_buffer.h"
 
 typedef struct gpu_scene {
@@ -26,14 +27,16 @@ typedef struct gpu_trace_params {
     vkrt_traversal traversal;  /* resolved */
     vkrt_heat heat;            /* resolved */
     vkrt_intersector intersector; /* _DEFAULT: watertight */
+    bool counters;             /* fill *out_counts (a pipeline variant that writes them) */
     vkrt_progress_fn progress; /* may be NULL */
     void *progress_user;
 } gpu_trace_params;
 
 /* Writes width * height * 4 floats (rows top to bottom) to out_rgba; *out_device_ms gets the
- * summed device time of the trace dispatches (0 where the queue has no timestamps). */
+ * summed device time of the trace dispatches (0 where the queue has no timestamps), and
+ * *out_counts the traversal counters (zero unless params->counters). */
 vkrt_result gpu_trace_render(vk_context *vk, const gpu_scene *scene, const gpu_trace_params *params,
-                             float *out_rgba, double *out_device_ms);
+                             float *out_rgba, double *out_device_ms, trace_counts *out_counts);
 
 typedef struct gpu_trace_rays_params {
     vkrt_traversal traversal;     /* resolved */

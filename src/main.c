@@ -112,6 +112,8 @@ static const char render_help[] =
     "  --validation              enable the Vulkan validation layer; any message fails the run\n"
     "  --repeat N                render once to warm up (shader compilation), then N times, and\n"
     "                            report the median times\n"
+    "  --counters                also report BVH boxes entered, leaves entered and triangle tests\n"
+    "                            per ray (the GPU counts in a pipeline variant of its own)\n"
     "  -q, --quiet / -v, --verbose\n"
     "\n"
     "examples:\n"
@@ -121,6 +123,7 @@ static const char render_help[] =
     "  vkrt render bunny.obj --mode id -o ids.pfm --backend cpu\n"
     "  vkrt render bunny.obj --mode depth -o depth.hdr --eye 0.5,0.3,1.2 --fov 30\n"
     "  vkrt render dragon.glb --repeat 5 --validation -o /tmp/dragon.png   median timings\n"
+    "  vkrt render dragon.glb --counters --bvh midpoint -o /tmp/d.png     traversal work per ray\n"
     "\n";
 
 static const char info_help[] =
@@ -343,6 +346,8 @@ static int parse_args(int argc, char **argv, options *o)
         } else if (!strcmp(arg, "--repeat")) {
             NEED_VALUE();
             if (!parse_u32(value, &o->repeat) || !o->repeat || o->repeat > 1000) return usage_error("bad --repeat '%s'", value);
+        } else if (!strcmp(arg, "--counters")) {
+            o->render.traversal_counters = true;
         } else if (!strcmp(arg, "--quick")) {
             o->quick = true;
         } else if (!strcmp(arg, "--validation")) {
@@ -544,6 +549,12 @@ static int command_render(options *o)
                 o->input ? o->input : "built-in scene", ss.triangles, w, h, mode_name(o->render.mode),
                 vkrt_context_device_name(ctx), stats.trace_ms, stats.total_ms,
                 o->repeat ? " (median after a warm-up)" : "", o->output);
+        if (o->render.traversal_counters) {
+            double rays = (double)stats.rays;
+            fprintf(stderr, "vkrt: per ray: %.2f boxes entered, %.2f leaves entered, %.2f triangle tests\n",
+                    (double)stats.nodes_visited / rays, (double)stats.leaves_visited / rays,
+                    (double)stats.tris_tested / rays);
+        }
     }
 done:
     free(rgba);

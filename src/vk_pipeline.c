@@ -7,8 +7,9 @@
 #include "../shaders/vkrt_shared.h"
 #include "shaders_embedded.h"
 
-/* Images: (3 modes + 3 heat kinds) x 2 traversals x 2 intersectors; rays: 2 x 2 more. */
-#define MAX_VARIANTS 32
+/* Images: (3 modes + 3 heat kinds) x 2 traversals x 2 intersectors x counters on or off;
+ * rays: 2 x 2 more. */
+#define MAX_VARIANTS 64
 
 typedef struct vk_pipelines {
     VkShaderModule trace_module;
@@ -86,6 +87,7 @@ static vkrt_result create_layouts(vk_context *vk, vk_pipelines *p)
         { VKRT_BINDING_RESUME, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, VK_SHADER_STAGE_COMPUTE_BIT, NULL },
         { VKRT_BINDING_RESUME_STACK, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, VK_SHADER_STAGE_COMPUTE_BIT, NULL },
         { VKRT_BINDING_UNFINISHED, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, VK_SHADER_STAGE_COMPUTE_BIT, NULL },
+        { VKRT_BINDING_COUNTERS, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, VK_SHADER_STAGE_COMPUTE_BIT, NULL },
     };
     VkDescriptorSetLayoutCreateInfo set_info = {
         .sType = VK_STRUCTURE_TYPE_DESCRIPTOR_SET_LAYOUT_CREATE_INFO,
@@ -180,6 +182,7 @@ vkrt_result vk_trace_pipeline_get(vk_context *vk, vk_trace_variant variant, vk_t
         { VKRT_SPEC_RAYGEN, offsetof(vk_trace_variant, raygen), sizeof(uint32_t) },
         { VKRT_SPEC_ISECT, offsetof(vk_trace_variant, isect), sizeof(uint32_t) },
         { VKRT_SPEC_BUDGET, offsetof(vk_trace_variant, budget), sizeof(uint32_t) },
+        { VKRT_SPEC_COUNTERS, offsetof(vk_trace_variant, counters), sizeof(uint32_t) },
     };
     VkSpecializationInfo spec = {
         .mapEntryCount = sizeof entries / sizeof entries[0],

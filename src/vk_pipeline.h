@@ -1,6 +1,7 @@
 /* The trace pipeline: GLSL embedded in the library compiled to SPIR-V through glslang's C API
  * (once per context), one descriptor set layout and pipeline layout, and one compute pipeline
- * per specialisation (mode, traversal, heat, ray source, intersector, budget), created on first use and kept. */
+ * per specialisation (mode, traversal, heat, ray source, intersector, budget, counters), created on
+ * first use and kept. */
 #ifndef VKRT_VK_PIPELINE_H
 #define VKRT_VK_PIPELINE_H
 
@@ -16,6 +17,7 @@ typedef struct vk_trace_variant {
     uint32_t raygen;     /* VKRT_GPU_RAYGEN_* */
     uint32_t isect;      /* VKRT_GPU_ISECT_* */
     uint32_t budget;     /* BVH loop iterations per dispatch, 0: unlimited (VKRT_SPEC_BUDGET) */
+    uint32_t counters;   /* 1: write each pixel's traversal counts (VKRT_SPEC_COUNTERS) */
 } vk_trace_variant;
 
 typedef struct vk_trace_pipeline {

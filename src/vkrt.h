@@ -255,6 +255,9 @@ typedef struct vkrt_render_desc {
     vkrt_heat heat;           /* heatmap mode only; default: nodes */
     vkrt_intersector intersector; /* default: watertight */
     vkrt_precision precision; /* default: float; double needs the CPU backend */
+    bool traversal_counters;  /* false (default): none; true: fill the traversal counters of
+                                 vkrt_render_stats (the GPU then traces with a pipeline variant
+                                 that writes them out, a little slower) */
     vkrt_progress_fn progress;/* NULL (default): none; called between tiles */
     void *progress_user;
 } vkrt_render_desc;
@@ -264,6 +267,13 @@ typedef struct vkrt_render_stats {
                           CPU: wall-clock time of the tracing threads */
     double total_ms;   /* wall-clock time of the whole call, upload and readback included */
     uint64_t rays;
+    /* With vkrt_render_desc.traversal_counters (else 0), summed over every ray: BVH boxes
+     * entered (the root's included), how many of those were leaves, and ray-triangle tests
+     * (naive traversal: 0, 0 and triangles x rays). Divide by rays for per-ray figures; the
+     * heatmap modes show the same counts per pixel. */
+    uint64_t nodes_visited;
+    uint64_t leaves_visited;
+    uint64_t tris_tested;
 } vkrt_render_stats;
 
 /* Floats vkrt_render() writes for an image of width x height: 4 per pixel (RGBA), rows top

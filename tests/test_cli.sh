@@ -47,6 +47,14 @@ for mode in normal depth heatmap id; do
   expect "render bunny --mode $mode" 0 "$vkrt" render "$models/meshes/bunny.obj" --mode "$mode" -o "$tmp/bunny_$mode.png" --size 48x48
 done
 expect "render heatmap of leaves with the midpoint BVH" 0 "$vkrt" render "$models/meshes/bunny.obj" --mode heatmap --heat leaves --bvh midpoint -o "$tmp/heat.png" --size 32x32
+# --counters: per-ray traversal work, the same on both backends for this small render
+"$vkrt" render "$models/meshes/bunny.obj" --counters -o "$tmp/c.png" --size 32x32 >"$tmp/out" 2>"$tmp/err"
+gpu_line=$(grep "per ray:" "$tmp/err")
+"$vkrt" render "$models/meshes/bunny.obj" --counters --backend cpu -o "$tmp/c.png" --size 32x32 >"$tmp/out" 2>"$tmp/err"
+cpu_line=$(grep "per ray:" "$tmp/err")
+if echo "$gpu_line" | grep -qE "per ray: [0-9.]+ boxes entered, [0-9.]+ leaves entered, [0-9.]+ triangle tests" &&
+   [ "$gpu_line" = "$cpu_line" ]; then ok "--counters prints per-ray work, equal on GPU and CPU"
+else bad "--counters prints per-ray work, equal on GPU and CPU ('$gpu_line' / '$cpu_line')"; fi
 expect "render glb with camera flags" 0 "$vkrt" render "$models/gltf/draco/Box/Box.glb" --eye 1,1,1.5 --target 0,0,0 --up 0,1,0 --fov 60 -o "$tmp/box.ppm" --size 32x24
 if head -c 2 "$tmp/box.ppm" 2>/dev/null | grep -q P6; then ok "PPM output"; else bad "PPM output"; fi
 

@@ -345,6 +345,7 @@ static void gpu_shared_layouts_match_c(void)
     vkrt_gpu_push push;
     vkrt_gpu_resume states[2];
     vkrt_gpu_stack_entry entries[2];
+    vkrt_gpu_counters counters[2];
     fill_distinct(nodes, sizeof nodes, 100.0f);
     fill_distinct(tris, sizeof tris, 200.0f);
     fill_distinct(hits, sizeof hits, 300.0f);
@@ -352,30 +353,32 @@ static void gpu_shared_layouts_match_c(void)
     fill_distinct(&push, sizeof push, 400.0f);
     fill_distinct(states, sizeof states, 500.0f);
     fill_distinct(entries, sizeof entries, 600.0f);
+    fill_distinct(counters, sizeof counters, 700.0f);
     /* The order in which layout_check.comp writes the structs out. */
-    const void *parts[] = { &nodes[1], &tris[1], &hits[1], &rays[1], &push, &states[1], &entries[1] };
-    const size_t part_sizes[] = { sizeof nodes[1], sizeof tris[1],  sizeof hits[1],   sizeof rays[1],
-                                  sizeof push,     sizeof states[1], sizeof entries[1] };
+    const void *parts[] = { &nodes[1], &tris[1], &hits[1], &rays[1], &push, &states[1], &entries[1], &counters[1] };
+    const size_t part_sizes[] = { sizeof nodes[1], sizeof tris[1],  sizeof hits[1],    sizeof rays[1],
+                                  sizeof push,     sizeof states[1], sizeof entries[1], sizeof counters[1] };
     uint32_t expected[128];
     size_t words = 0;
-    for (int i = 0; i < 7; i++) {
+    for (int i = 0; i < 8; i++) {
         memcpy(expected + words, parts[i], part_sizes[i]);
         words += part_sizes[i] / 4;
     }
     CHECK(words <= 128);
 
-    /* Bindings 0-2 and 4-6 are inputs; binding 3 receives the words. */
-    vk_buffer buffers[7] = { 0 };
-    const void *data[7] = { nodes, tris, hits, NULL, rays, states, entries };
-    const size_t sizes[7] = { sizeof nodes, sizeof tris, sizeof hits, 128 * 4, sizeof rays, sizeof states, sizeof entries };
-    bool ok = create_check_buffers(buffers, data, sizes, 7);
-    ok = ok && run_check_shader("layout_check.comp", vkrt_shader_layout_check_comp, buffers, 7, &push, sizeof push, 1);
+    /* Bindings 0-2 and 4-7 are inputs; binding 3 receives the words. */
+    vk_buffer buffers[8] = { 0 };
+    const void *data[8] = { nodes, tris, hits, NULL, rays, states, entries, counters };
+    const size_t sizes[8] = { sizeof nodes,  sizeof tris,   sizeof hits,    128 * 4,
+                              sizeof rays,   sizeof states, sizeof entries, sizeof counters };
+    bool ok = create_check_buffers(buffers, data, sizes, 8);
+    ok = ok && run_check_shader("layout_check.comp", vkrt_shader_layout_check_comp, buffers, 8, &push, sizeof push, 1);
     if (ok) {
         const uint32_t *got = buffers[3].mapped;
         for (size_t i = 0; i < words; i++)
             CHECK_MSG(got[i] == expected[i], "word %zu: shader read 0x%08x, C wrote 0x%08x", i, got[i], expected[i]);
     }
-    for (int i = 0; i < 7; i++) vk_buffer_destroy(gpu->vk, &buffers[i]);
+    for (int i = 0; i < 8; i++) vk_buffer_destroy(gpu->vk, &buffers[i]);
 }
 
 /* ray_offset() in GLSL against the C function, bit for bit, on hit points from 1e-30 to 1e30,
@@ -683,6 +686,102 @@ static void gpu_image_beyond_the_loop_limit_matches_cpu(void)
     free(idx);
 }
 
+/* The heatmap's three counts of every pixel, summed: what vkrt_render_stats' traversal
+ * counters must report for the same render. */
+static void heatmap_sums(vkrt_context *ctx, vkrt_scene *s, vkrt_render_desc d, uint64_t out[3])
+{
+    d.mode = VKRT_MODE_HEATMAP;
+    d.traversal_counters = false;
+    for (int k = 0; k < 3; k++) {
+        d.heat = (vkrt_heat)(VKRT_HEAT_NODES + k);
+        float *img = render(ctx, s, &d);
+        out[k] = 0;
+        for (size_t i = 0; img && i < (size_t)d.width * d.height; i++) out[k] += (uint64_t)img[i * 4];
+        free(img);
+    }
+}
+
+static vkrt_render_stats counted_render(vkrt_context *ctx, vkrt_scene *s, vkrt_render_desc d)
+{
+    size_t n = vkrt_render_floats(d.width, d.height);
+    float *rgba = malloc(n * sizeof *rgba);
+    vkrt_render_stats st = { 0 };
+    d.traversal_counters = true;
+    vkrt_result r = rgba ? vkrt_render(ctx, s, &d, rgba, n, &st) : VKRT_ERROR_OUT_OF_MEMORY;
+    CHECK_MSG(r == VKRT_OK, "render: %s", vkrt_context_last_error(ctx));
+    free(rgba);
+    return st;
+}
+
+/* vkrt_render_stats' traversal counters on both backends: equal to the sums of the same
+ * backend's heatmaps (BVH; on bunny with both builders, and the leaf stack whose rays run past
+ * lavapipe's loop limit and resume), within 1% between GPU and CPU, zero when not asked for,
+ * and triangles x rays for naive traversal. */
+static void gpu_traversal_counters_sum_the_heatmap(void)
+{
+    const uint32_t w = 96, h = 64;
+    for (int b = 0; b < 3; b++) {
+        vkrt_scene *sg = NULL, *sc = NULL;
+        vkrt_render_desc d = { .width = w, .height = h };
+        float *pos = NULL;
+        uint32_t *idx = NULL;
+        if (b < 2) {
+            vkrt_bvh_builder builder = b ? VKRT_BVH_BUILDER_MIDPOINT : VKRT_BVH_BUILDER_DEFAULT;
+            sg = make_scene(gpu, VKRT_MODELS_DIR "/meshes/bunny.obj", builder);
+            sc = make_scene(cpu, VKRT_MODELS_DIR "/meshes/bunny.obj", builder);
+        } else {
+            make_leaf_stack(&pos, &idx);
+            sg = mesh_scene(gpu, pos, STACK_TRIS * 3, idx, STACK_TRIS, VKRT_BVH_BUILDER_DEFAULT);
+            sc = mesh_scene(cpu, pos, STACK_TRIS * 3, idx, STACK_TRIS, VKRT_BVH_BUILDER_DEFAULT);
+            d = (vkrt_render_desc){ .width = 9, .height = 7,
+                                    .camera = { .eye = { -0.2f, 0, 3 }, .target = { -0.2f, 0, 0 }, .fov_y_degrees = 10 } };
+        }
+        for (int k = 0; sg && sc && k < 2; k++) {
+            vkrt_context *ctx = k ? cpu : gpu;
+            vkrt_scene *s = k ? sc : sg;
+            uint64_t sums[3];
+            heatmap_sums(ctx, s, d, sums);
+            vkrt_render_stats st = counted_render(ctx, s, d);
+            fprintf(stderr, "  case %d %s: %llu rays, %llu nodes, %llu leaves, %llu triangle tests\n", b, k ? "cpu" : "gpu",
+                    (unsigned long long)st.rays, (unsigned long long)st.nodes_visited,
+                    (unsigned long long)st.leaves_visited, (unsigned long long)st.tris_tested);
+            CHECK_MSG(st.nodes_visited == sums[0] && st.leaves_visited == sums[1] && st.tris_tested == sums[2],
+                      "case %d %s: counters %llu %llu %llu, heatmap sums %llu %llu %llu", b, k ? "cpu" : "gpu",
+                      (unsigned long long)st.nodes_visited, (unsigned long long)st.leaves_visited,
+                      (unsigned long long)st.tris_tested, (unsigned long long)sums[0], (unsigned long long)sums[1],
+                      (unsigned long long)sums[2]);
+            /* A pushed leaf may be culled before its triangles are tested: tests can be fewer. */
+            CHECK_MSG(st.leaves_visited > 0 && st.leaves_visited <= st.nodes_visited && st.tris_tested > 0,
+                      "case %d: implausible counters", b);
+        }
+        vkrt_render_stats g = counted_render(gpu, sg, d), c = counted_render(cpu, sc, d);
+        CHECK_MSG(llabs((long long)g.nodes_visited - (long long)c.nodes_visited) * 100 <= (long long)c.nodes_visited &&
+                      llabs((long long)g.tris_tested - (long long)c.tris_tested) * 100 <= (long long)c.tris_tested,
+                  "case %d: GPU and CPU counters differ by more than 1%%", b);
+        vkrt_render_stats plain = { .nodes_visited = 1 };
+        size_t n = vkrt_render_floats(d.width, d.height);
+        float *rgba = malloc(n * sizeof *rgba);
+        CHECK(rgba && vkrt_render(gpu, sg, &d, rgba, n, &plain) == VKRT_OK);
+        CHECK_MSG(plain.nodes_visited == 0 && plain.tris_tested == 0, "counters filled without being asked for");
+        if (b == 0) {
+            vkrt_scene_stats ss;
+            CHECK(vkrt_scene_stats_get(sg, &ss) == VKRT_OK);
+            d.traversal = VKRT_TRAVERSAL_NAIVE;
+            for (int k = 0; k < 2; k++) {
+                vkrt_render_stats st = counted_render(k ? cpu : gpu, k ? sc : sg, d);
+                CHECK_MSG(st.nodes_visited == 0 && st.tris_tested == (uint64_t)ss.triangles * w * h,
+                          "naive %s: %llu triangle tests, expected %llu", k ? "cpu" : "gpu",
+                          (unsigned long long)st.tris_tested, (unsigned long long)ss.triangles * w * h);
+            }
+        }
+        free(rgba);
+        free(pos);
+        free(idx);
+        vkrt_scene_destroy(sg);
+        vkrt_scene_destroy(sc);
+    }
+}
+
 /* Double precision is the CPU reference's alone: the GPU refuses it with a message saying so. */
 static void gpu_refuses_double_precision(void)
 {
@@ -742,6 +841,7 @@ int main(void)
     RUN(gpu_secondary_rays_never_rehit_their_own_triangle);
     RUN(gpu_traversals_beyond_the_loop_limit_match_cpu);
     RUN(gpu_image_beyond_the_loop_limit_matches_cpu);
+    RUN(gpu_traversal_counters_sum_the_heatmap);
 
     CHECK_EQ_U64(vkrt_context_validation_messages(gpu), 0);
     vkrt_context_destroy(gpu);

@@ -1,0 +1,14 @@
+/* Traversal counters of a render, summed over its primary rays (vkrt_render_stats): what the
+ * heat map shows per pixel, in total. Both backends fill one. */
+#ifndef VKRT_TRACE_COUNTS_H
+#define VKRT_TRACE_COUNTS_H
+
+#include <stdint.h>
+
+typedef struct trace_counts {
+    uint64_t nodes;  /* BVH boxes entered, the root's included */
+    uint64_t leaves; /* of those, leaves */
+    uint64_t tris;   /* ray-triangle tests (naive traversal: every triangle, every ray) */
+} trace_counts;
+
+#endif
