@@ -10,6 +10,7 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "bench.h"
 #include "stress.h"
 #include "vkrt.h"
 
@@ -74,6 +75,8 @@ static const char usage_text[] =
     "  render [FILE]   trace FILE (.obj, .gltf, .glb; the built-in scene when none) to an image\n"
     "  info FILE       load FILE, build its BVH and print statistics\n"
     "  devices         list the Vulkan devices\n"
+    "  bench [FILE]    time every configuration (backend, builder, traversal, intersector,\n"
+    "                  precision) and measure its error against the double-precision reference\n"
     "  stress          numerical-stability suite: both backends and intersectors against the CPU\n"
     "                  double-precision reference, as a table; exit 1 when a watertight row fails\n"
     "\n"
@@ -175,6 +178,31 @@ static const char stress_help[] =
     "  vkrt stress --isect watertight | grep FAIL    the watertight rows that fail\n"
     "\n";
 
+static const char bench_help[] =
+    "usage: vkrt bench [FILE] [--quick] [--csv OUT.csv] [--size WxH] [--repeat N] [options]\n"
+    "Renders one view of FILE (the built-in scene when none) with every configuration: backend\n"
+    "(gpu, cpu), BVH builder (sah, midpoint), traversal (bvh; naive where it costs at most 1e8\n"
+    "ray-triangle tests), intersector (watertight, mt) and, on the CPU, precision (float, double).\n"
+    "Each row: build time, SAH cost, bytes per triangle, trace time (median after a warm-up; GPU:\n"
+    "device time from timestamp queries), total time of the call, Mrays/s, boxes, leaves and\n"
+    "triangle tests per ray, and the error against the CPU double-precision reference: pixels\n"
+    "that hit another surface (or miss), relative depth RMSE and maximum. Prints a markdown table.\n"
+    "\n"
+    "options (defaults first):\n"
+    "  --quick                   64x64 and one timed render (the test suite's run)\n"
+    "  --csv OUT.csv             also write the rows as CSV (atomically)\n"
+    "  --size WxH                512x512\n"
+    "  --repeat N                5 timed renders after the warm-up\n"
+    "  --backend gpu|cpu         only that backend (default: both)\n"
+    "  --eye, --target, --up, --fov, --no-normalize, --device N, --threads N, --validation, -q\n"
+    "                            as for render\n"
+    "\n"
+    "examples:\n"
+    "  vkrt bench                                    the built-in scene, every configuration\n"
+    "  vkrt bench dragon.glb --csv dragon.csv        and the rows as CSV\n"
+    "  vkrt bench bunny.obj --backend gpu --size 1024x1024 --repeat 9\n"
+    "\n";
+
 static const char help_footer[] =
     "exit codes: 0 success, 1 internal error, 2 usage, 3 bad input file, 4 device (Vulkan) error,\n"
     "            5 validation-layer messages (with --validation)\n"
@@ -189,6 +217,7 @@ static void print_help(FILE *f, const char *command)
     else if (command && !strcmp(command, "info")) text = info_help;
     else if (command && !strcmp(command, "devices")) text = devices_help;
     else if (command && !strcmp(command, "stress")) text = stress_help;
+    else if (command && !strcmp(command, "bench")) text = bench_help;
     fputs(text, f);
     fputs(help_footer, f);
 }
@@ -202,7 +231,8 @@ typedef struct options {
     vkrt_render_desc render;
     float heat_max;
     uint32_t repeat; /* timed renders after one warm-up; 0: a single render */
-    bool quick;      /* stress: the reduced run */
+    bool quick;      /* stress, bench: the reduced run */
+    const char *csv; /* bench: CSV output */
 } options;
 
 static bool parse_vec3(const char *s, float v[3])
@@ -346,6 +376,9 @@ static int parse_args(int argc, char **argv, options *o)
         } else if (!strcmp(arg, "--repeat")) {
             NEED_VALUE();
             if (!parse_u32(value, &o->repeat) || !o->repeat || o->repeat > 1000) return usage_error("bad --repeat '%s'", value);
+        } else if (!strcmp(arg, "--csv")) {
+            NEED_VALUE();
+            o->csv = value;
         } else if (!strcmp(arg, "--counters")) {
             o->render.traversal_counters = true;
         } else if (!strcmp(arg, "--quick")) {
@@ -405,18 +438,6 @@ static const char *mode_name(vkrt_mode m)
 {
     static const char *names[] = { "normal", "normal", "depth", "heatmap", "id" };
     return names[m];
-}
-
-static int compare_doubles(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return (x > y) - (x < y);
-}
-
-static double median(double *v, uint32_t n)
-{
-    qsort(v, n, sizeof *v, compare_doubles);
-    return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
 }
 
 static bool known_image_extension(const char *path)
@@ -531,8 +552,8 @@ static int command_render(options *o)
         total_ms[i] = stats.total_ms;
     }
     if (o->repeat) { /* the first run is the warm-up */
-        stats.trace_ms = median(trace_ms + 1, o->repeat);
-        stats.total_ms = median(total_ms + 1, o->repeat);
+        stats.trace_ms = bench_median(trace_ms + 1, o->repeat);
+        stats.total_ms = bench_median(total_ms + 1, o->repeat);
     }
     /* Validation findings fail the run before anything is written. */
     if ((code = check_validation(ctx, o)) != EXIT_OK) goto done;
@@ -636,6 +657,21 @@ static int command_devices(options *o)
     return EXIT_OK;
 }
 
+/* How a suite (stress, bench) ended: its error, or validation messages where the layer was on. */
+static int suite_exit_code(const options *o, vkrt_result r, const char *error, unsigned validation_messages)
+{
+    if (r != VKRT_OK) {
+        fprintf(stderr, "vkrt: error: %s\n", error);
+        return exit_code_for(r);
+    }
+    if (o->context.validation && validation_messages) {
+        fprintf(stderr, "vkrt: error: the Vulkan validation layer reported %u message%s\n", validation_messages,
+                validation_messages == 1 ? "" : "s");
+        return EXIT_VALIDATION;
+    }
+    return EXIT_OK;
+}
+
 static int command_stress(options *o)
 {
     if (o->input) return usage_error("stress takes no FILE ('%s')", o->input);
@@ -645,16 +681,24 @@ static int command_stress(options *o)
     so.context.pipeline_cache_path = pipeline_cache_path(cache_buf, sizeof cache_buf);
     stress_report report;
     vkrt_result r = stress_run(&so, &report);
-    if (r != VKRT_OK) {
-        fprintf(stderr, "vkrt: error: %s\n", report.error);
-        return exit_code_for(r);
-    }
-    if (o->context.validation && report.validation_messages) {
-        fprintf(stderr, "vkrt: error: the Vulkan validation layer reported %u message%s\n", report.validation_messages,
-                report.validation_messages == 1 ? "" : "s");
-        return EXIT_VALIDATION;
-    }
+    int code = suite_exit_code(o, r, report.error, report.validation_messages);
+    if (code != EXIT_OK) return code;
     return report.failed_rows ? EXIT_INTERNAL : EXIT_OK;
+}
+
+static int command_bench(options *o)
+{
+    char cache_buf[4200];
+    bench_options bo = {
+        .context = o->context, .backend = o->context.backend, .input = o->input,
+        .keep_world_coordinates = o->scene.keep_world_coordinates, .camera = o->render.camera,
+        .width = o->render.width, .height = o->render.height, .repeat = o->repeat, .quick = o->quick,
+        .csv_path = o->csv, .progress = verbosity >= 1 && !getenv("CI"),
+    };
+    bo.context.pipeline_cache_path = pipeline_cache_path(cache_buf, sizeof cache_buf);
+    bench_report report;
+    vkrt_result r = bench_run(&bo, &report);
+    return suite_exit_code(o, r, report.error, report.validation_messages);
 }
 
 int main(int argc, char **argv)
@@ -678,5 +722,6 @@ int main(int argc, char **argv)
     if (!strcmp(o.command, "info")) return command_info(&o);
     if (!strcmp(o.command, "devices")) return command_devices(&o);
     if (!strcmp(o.command, "stress")) return command_stress(&o);
-    return usage_error("unknown command '%s' (render, info, devices, stress)", o.command);
+    if (!strcmp(o.command, "bench")) return command_bench(&o);
+    return usage_error("unknown command '%s' (render, info, devices, bench, stress)", o.command);
 }

@@ -11,6 +11,8 @@
 #include <string.h>
 #include <time.h>
 
+#include "cli_contexts.h"
+
 #define PI 3.14159265358979323846
 /* VKRT_MAX_BVH_DEPTH of shaders/vkrt_shared.h: the depth every builder promises to stay within. */
 #define BVH_DEPTH_CAP 64u
@@ -1198,21 +1200,9 @@ vkrt_result stress_run(const stress_options *o, stress_report *out)
     memset(out, 0, sizeof *out);
     runner u = { .o = o, .report = out, .out = o->out ? o->out : stdout };
     double t0 = now_seconds();
-    vkrt_context_desc cd = o->context;
-    cd.backend = VKRT_BACKEND_CPU;
-    vkrt_result r = vkrt_context_create(&cd, &u.cpu);
-    if (r != VKRT_OK) {
-        snprintf(out->error, sizeof out->error, "creating the CPU backend: %s", vkrt_result_string(r));
-        return r;
-    }
-    if (o->backend != VKRT_BACKEND_CPU) {
-        cd.backend = VKRT_BACKEND_GPU;
-        if ((r = vkrt_context_create(&cd, &u.gpu)) != VKRT_OK) {
-            snprintf(out->error, sizeof out->error, "creating the Vulkan backend: %s", vkrt_result_string(r));
-            vkrt_context_destroy(u.cpu);
-            return r;
-        }
-    }
+    vkrt_result r = cli_contexts_create(&o->context, o->backend != VKRT_BACKEND_CPU, &u.gpu, &u.cpu, out->error,
+                                        sizeof out->error);
+    if (r != VKRT_OK) return r;
     u.cpu_rows = o->backend != VKRT_BACKEND_GPU;
     fprintf(u.out, "vkrt stress%s: %s against the CPU double-precision reference (watertight)\n",
             o->quick ? " --quick" : "", u.gpu ? vkrt_context_device_name(u.gpu) : "CPU float");

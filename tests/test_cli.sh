@@ -55,6 +55,30 @@ cpu_line=$(grep "per ray:" "$tmp/err")
 if echo "$gpu_line" | grep -qE "per ray: [0-9.]+ boxes entered, [0-9.]+ leaves entered, [0-9.]+ triangle tests" &&
    [ "$gpu_line" = "$cpu_line" ]; then ok "--counters prints per-ray work, equal on GPU and CPU"
 else bad "--counters prints per-ray work, equal on GPU and CPU ('$gpu_line' / '$cpu_line')"; fi
+# bench --quick: a row per configuration in the table and a well-formed CSV with finite figures
+expect "bench --quick --csv" 0 "$vkrt" bench --quick --csv "$tmp/bench.csv"
+if python3 - "$tmp/bench.csv" "$tmp/out" <<'PY'
+import csv, math, sys
+rows = list(csv.DictReader(open(sys.argv[1])))
+table = [l for l in open(sys.argv[2]) if l.startswith("| ") and not l.startswith("| builder")]
+assert len(rows) == len(table) == 18, (len(rows), len(table))
+seen = {(r["builder"], r["backend"], r["traversal"], r["intersector"], r["precision"]) for r in rows}
+assert len(seen) == 18, seen
+for r in rows:
+    for k in ("build_ms", "sah_cost", "bytes_per_triangle", "trace_ms", "total_ms", "mrays_per_s", "boxes_per_ray",
+              "tests_per_ray", "depth_rel_rmse", "depth_rel_max"):
+        v = float(r[k])
+        assert math.isfinite(v) and v >= 0, (k, r[k])
+    assert float(r["trace_ms"]) > 0 and float(r["mrays_per_s"]) > 0 and int(r["mismatched_pixels"]) >= 0
+    if r["traversal"] == "naive":
+        assert float(r["tests_per_ray"]) == float(r["triangles"]) and float(r["boxes_per_ray"]) == 0, r
+    else:
+        assert 0 < float(r["boxes_per_ray"]) < 200, r
+    if r["precision"] == "double" and r["intersector"] == "watertight" and r["builder"] == "sah":
+        assert int(r["mismatched_pixels"]) == 0 and float(r["depth_rel_max"]) == 0, r  # the reference itself
+PY
+then ok "bench CSV: 18 configurations, finite figures, the reference row exact"; else bad "bench CSV: 18 configurations, finite figures, the reference row exact"; fi
+expect "bench with a FILE that does not exist fails as input" 3 "$vkrt" bench "$tmp/missing.obj" --quick
 expect "render glb with camera flags" 0 "$vkrt" render "$models/gltf/draco/Box/Box.glb" --eye 1,1,1.5 --target 0,0,0 --up 0,1,0 --fov 60 -o "$tmp/box.ppm" --size 32x24
 if head -c 2 "$tmp/box.ppm" 2>/dev/null | grep -q P6; then ok "PPM output"; else bad "PPM output"; fi
 
@@ -118,7 +142,7 @@ PY
 then ok ".hdr header, size and values match the PFM"; else bad ".hdr header, size and values match the PFM"; fi
 
 # --- per-command help -----------------------------------------------------------------
-for cmd in render info devices; do
+for cmd in render info devices bench stress; do
   "$vkrt" "$cmd" --help >"$tmp/help" 2>"$tmp/err"
   got=$?
   if [ "$got" -eq 0 ] && grep -q "^usage: vkrt $cmd" "$tmp/help" && grep -q '^examples:' "$tmp/help" \
