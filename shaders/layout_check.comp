@@ -14,6 +14,8 @@ layout(std430, set = 0, binding = 4) readonly buffer Rays { vkrt_gpu_ray rays[];
 layout(std430, set = 0, binding = 5) readonly buffer Resume { vkrt_gpu_resume states[]; };
 layout(std430, set = 0, binding = 6) readonly buffer ResumeStack { vkrt_gpu_stack_entry entries[]; };
 layout(std430, set = 0, binding = 7) readonly buffer Counters { vkrt_gpu_counters counters[]; };
+layout(std430, set = 0, binding = 8) readonly buffer Surfaces { vkrt_gpu_surface surfaces[]; };
+layout(std430, set = 0, binding = 9) readonly buffer Materials { vkrt_gpu_material materials[]; };
 layout(push_constant) uniform PushBlock { vkrt_gpu_push p; };
 
 uint k = 0;
@@ -43,4 +45,9 @@ void main()
     put(e.node); put(e.tnear);
     vkrt_gpu_counters c = counters[1];
     put(c.nodes); put(c.leaves); put(c.tris); put(c.pad0);
+    vkrt_gpu_surface f = surfaces[1];
+    put(f.u0); put(f.v0); put(f.u1); put(f.v1); put(f.u2); put(f.v2); put(f.material); put(f.pad0);
+    vkrt_gpu_material m = materials[1];
+    put(m.base_color); put(m.alpha); put(m.emissive); put(m.metallic); put(m.roughness); put(m.pad0); put(m.pad1);
+    put(m.pad2);
 }

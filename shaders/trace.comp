@@ -1,7 +1,7 @@
 /* One primary ray per pixel of a tile (RAYGEN camera), or one ray of the ray buffer per
  * invocation (RAYGEN buffer, vkrt_trace_rays). The mode, traversal, heat kind, ray source,
- * intersector and loop budget are specialization constants, so each pipeline keeps only the
- * code it uses.
+ * intersector, loop budget and traversal counters are specialization constants, so each
+ * pipeline keeps only the code it uses.
  * Mirrors trace_pixel(), trace_one_ray() and their callees in src/cpu_trace.c and
  * src/cpu_trace_real.h. */
 #version 460
@@ -50,6 +50,14 @@ layout(set = 0, binding = VKRT_BINDING_UNFINISHED, std430) buffer Unfinished {
 /* With COUNTERS: what each pixel's traversal did, summed by the host (render statistics). */
 layout(set = 0, binding = VKRT_BINDING_COUNTERS, std430) writeonly buffer Counters {
     vkrt_gpu_counters counters[];
+};
+/* Albedo and uv modes: each triangle's texture coordinates and material (by prim_id), and the
+ * material table. Other modes never read them (and their buffers are placeholders then). */
+layout(set = 0, binding = VKRT_BINDING_SURFACES, std430) readonly buffer Surfaces {
+    vkrt_gpu_surface surfaces[];
+};
+layout(set = 0, binding = VKRT_BINDING_MATERIALS, std430) readonly buffer Materials {
+    vkrt_gpu_material materials[];
 };
 layout(push_constant, std430) uniform Push {
     vkrt_gpu_push p;
@@ -210,6 +218,16 @@ bool already_finished(uint slot)
     return BUDGET != 0u && p.resume != 0u && states[slot].unfinished == 0u;
 }
 
+/* Texture coordinates interpolated with the hit's barycentrics (u: corner 1, v: corner 2).
+ * Mirrors the VKRT_MODE_UV case of shade() in src/cpu_trace.c. */
+vec4 shade_uv(vkrt_gpu_surface f, float u, float v)
+{
+    precise float w = 1.0 - u - v;
+    precise float s = (f.u0 * w + f.u1 * u) + f.u2 * v;
+    precise float t = (f.v0 * w + f.v1 * u) + f.v2 * v;
+    return vec4(s, t, 0.0, 1.0);
+}
+
 vec4 shade(hit best, heat_counts heat)
 {
     bool is_hit = best.prim != NO_PRIM;
@@ -221,6 +239,12 @@ vec4 shade(hit best, heat_counts heat)
         return is_hit ? vec4(best.t, 0.0, 0.0, 1.0) : vec4(VKRT_MISS, 0.0, 0.0, 0.0);
     if (MODE == VKRT_GPU_MODE_ID)
         return is_hit ? vec4(float(best.prim), best.u, best.v, 1.0) : vec4(VKRT_MISS, 0.0, 0.0, 0.0);
+    if (MODE == VKRT_GPU_MODE_ALBEDO) {
+        if (!is_hit) return vec4(0.0);
+        vkrt_gpu_material m = materials[surfaces[best.prim].material];
+        return vec4(m.base_color, m.alpha);
+    }
+    if (MODE == VKRT_GPU_MODE_UV) return is_hit ? shade_uv(surfaces[best.prim], best.u, best.v) : vec4(0.0);
     if (!is_hit) return vec4(0.0);
     return shade_normal(tris[best.tri], best.u, best.v);
 }

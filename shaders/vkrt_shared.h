@@ -38,6 +38,8 @@ typedef struct vkrt_float3 { float x, y, z; } vkrt_float3;
 #define VKRT_BINDING_RESUME_STACK 6    /* VKRT_TRAVERSAL_STACK_SIZE vkrt_gpu_stack_entry per slot */
 #define VKRT_BINDING_UNFINISHED 7      /* one uint: invocations that stopped at the budget */
 #define VKRT_BINDING_COUNTERS 8        /* vkrt_gpu_counters per pixel of a tile (VKRT_SPEC_COUNTERS) */
+#define VKRT_BINDING_SURFACES 9        /* vkrt_gpu_surface per triangle, by prim_id (albedo, uv) */
+#define VKRT_BINDING_MATERIALS 10      /* vkrt_gpu_material table (albedo) */
 
 /* Specialization constant ids: features a render does not use are compiled out instead of
  * branched over (lavapipe pays nearly full price for an `if` that is false everywhere). */
@@ -54,6 +56,8 @@ typedef struct vkrt_float3 { float x, y, z; } vkrt_float3;
 #define VKRT_GPU_MODE_DEPTH 2
 #define VKRT_GPU_MODE_HEATMAP 3
 #define VKRT_GPU_MODE_ID 4
+#define VKRT_GPU_MODE_ALBEDO 5
+#define VKRT_GPU_MODE_UV 6
 #define VKRT_GPU_TRAVERSAL_BVH 1
 #define VKRT_GPU_TRAVERSAL_NAIVE 2
 #define VKRT_GPU_HEAT_NODES 1
@@ -179,6 +183,32 @@ VKRT_STRUCT(vkrt_gpu_counters) {
     VKRT_UINT pad0;        /* offset 12 */
 };
 
+/* What a triangle's surface carries besides its geometry, 32 bytes, indexed by prim_id (load
+ * order): the texture coordinates of its corners and its material. Read only by the modes
+ * that need them, and uploaded only then. */
+VKRT_STRUCT(vkrt_gpu_surface) {
+    float u0;              /* offset  0 */
+    float v0;              /* offset  4 */
+    float u1;              /* offset  8 */
+    float v1;              /* offset 12 */
+    float u2;              /* offset 16 */
+    float v2;              /* offset 20 */
+    VKRT_UINT material;    /* offset 24; index into the material table */
+    VKRT_UINT pad0;        /* offset 28 */
+};
+
+/* A material (vkrt_material), 48 bytes. */
+VKRT_STRUCT(vkrt_gpu_material) {
+    VKRT_FLOAT3 base_color; /* offset  0; linear RGB */
+    float alpha;            /* offset 12 */
+    VKRT_FLOAT3 emissive;   /* offset 16 */
+    float metallic;         /* offset 28 */
+    float roughness;        /* offset 32 */
+    VKRT_UINT pad0;         /* offset 36 */
+    VKRT_UINT pad1;         /* offset 40 */
+    VKRT_UINT pad2;         /* offset 44 */
+};
+
 /* One saved traversal stack entry, 8 bytes: a pushed node and the distance its box starts. */
 VKRT_STRUCT(vkrt_gpu_stack_entry) {
     VKRT_UINT node;        /* offset  0 */
@@ -241,6 +271,9 @@ _Static_assert(sizeof(vkrt_gpu_stack_entry) == 8, "vkrt_gpu_stack_entry must mat
 _Static_assert(offsetof(vkrt_gpu_stack_entry, tnear) == 4, "vkrt_gpu_stack_entry.tnear must match std430");
 _Static_assert(VKRT_NAIVE_CHUNK_TRIS <= VKRT_LAVAPIPE_BUDGET, "a naive chunk's loop must fit lavapipe's loop limit");
 _Static_assert(sizeof(vkrt_gpu_counters) == 16, "vkrt_gpu_counters must match std430");
+_Static_assert(sizeof(vkrt_gpu_surface) == 32, "vkrt_gpu_surface must match std430");
+_Static_assert(sizeof(vkrt_gpu_material) == 48, "vkrt_gpu_material must match std430");
+_Static_assert(offsetof(vkrt_gpu_material, emissive) == 16, "vkrt_gpu_material.emissive must match std430");
 _Static_assert(sizeof(vkrt_gpu_push) == 96, "vkrt_gpu_push must match the push-constant range");
 _Static_assert(offsetof(vkrt_gpu_push, right) == 16, "vkrt_gpu_push.right must match std430");
 _Static_assert(offsetof(vkrt_gpu_push, up) == 32, "vkrt_gpu_push.up must match std430");

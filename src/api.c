@@ -16,7 +16,8 @@
 #define MAX_IMAGE_SIZE 65536u
 
 _Static_assert(VKRT_GPU_MODE_NORMAL == VKRT_MODE_NORMAL && VKRT_GPU_MODE_DEPTH == VKRT_MODE_DEPTH &&
-                   VKRT_GPU_MODE_HEATMAP == VKRT_MODE_HEATMAP && VKRT_GPU_MODE_ID == VKRT_MODE_ID,
+                   VKRT_GPU_MODE_HEATMAP == VKRT_MODE_HEATMAP && VKRT_GPU_MODE_ID == VKRT_MODE_ID &&
+                   VKRT_GPU_MODE_ALBEDO == VKRT_MODE_ALBEDO && VKRT_GPU_MODE_UV == VKRT_MODE_UV,
                "shader mode values must equal vkrt_mode");
 _Static_assert(VKRT_GPU_TRAVERSAL_BVH == VKRT_TRAVERSAL_BVH && VKRT_GPU_TRAVERSAL_NAIVE == VKRT_TRAVERSAL_NAIVE,
                "shader traversal values must equal vkrt_traversal");
@@ -103,6 +104,11 @@ vkrt_result vkrt_devices_list(const vkrt_context_desc *desc, vkrt_device_info *o
 
 /* ---- scenes ---- */
 
+vkrt_material vkrt_material_default(void)
+{
+    return (vkrt_material){ .base_color = { 0.8f, 0.8f, 0.8f, 1.0f }, .metallic = 0.0f, .roughness = 1.0f };
+}
+
 void vkrt_scene_destroy(vkrt_scene *scene)
 {
     if (!scene) return;
@@ -110,6 +116,8 @@ void vkrt_scene_destroy(vkrt_scene *scene)
     if (scene->ctx->vk) gpu_scene_destroy(scene->ctx->vk, &scene->gpu);
     bvh_destroy(c, &scene->bvh);
     core_free(c, scene->tris);
+    core_free(c, scene->surfaces);
+    core_free(c, scene->materials);
     core_free(c, scene);
 }
 
@@ -131,6 +139,10 @@ static void fill_stats(vkrt_scene *s, const mesh *m, double load_ms)
     st->triangle_bytes = (uint64_t)s->bvh.tri_count * sizeof(vkrt_gpu_tri);
     memcpy(st->bounds_min, m->bounds_min, sizeof st->bounds_min);
     memcpy(st->bounds_max, m->bounds_max, sizeof st->bounds_max);
+    st->materials = m->material_count;
+    st->has_texcoords = m->has_texcoords;
+    st->surface_bytes = (uint64_t)m->tri_count * sizeof(vkrt_gpu_surface) +
+                        (uint64_t)m->material_count * sizeof(vkrt_gpu_material);
 }
 
 /* The caller's arrays go through the same validation, normal generation and transform as a
@@ -150,8 +162,15 @@ static vkrt_result meshes_from_memory(core *c, const vkrt_scene_desc *d, mesh *m
             .index_count = md->index_count,
             .normals = md->normals,
             .transform = md->transform,
+            .texcoords = md->texcoords,
         };
-        vkrt_result r = mesh_append_indexed(c, m, &p, "in-memory scene", what);
+        vkrt_result r = VKRT_OK;
+        if (md->material) {
+            uint32_t index;
+            r = mesh_add_material(c, m, md->material, VKRT_ERROR_INVALID_ARGUMENT, "in-memory scene", what, &index);
+            p.material = MESH_MATERIAL(index);
+        }
+        if (r == VKRT_OK) r = mesh_append_indexed(c, m, &p, "in-memory scene", what);
         if (r != VKRT_OK) {
             mesh_destroy(c, m);
             return r;
@@ -206,6 +225,14 @@ vkrt_result vkrt_scene_create(vkrt_context *ctx, const vkrt_scene_desc *desc, vk
         goto fail;
     }
     scene_pack_triangles(&m, &s->bvh, s->tris);
+    s->surfaces = core_alloc_array(c, m.tri_count, sizeof *s->surfaces);
+    s->materials = core_alloc_array(c, m.material_count, sizeof *s->materials);
+    if (!s->surfaces || !s->materials) {
+        r = core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "out of memory packing the surfaces of %u triangles", m.tri_count);
+        goto fail;
+    }
+    s->material_count = m.material_count;
+    scene_pack_surfaces(&m, s->surfaces, s->materials);
     fill_stats(s, &m, load_ms);
     mesh_destroy(c, &m);
     if (ctx->vk) {
@@ -269,7 +296,7 @@ vkrt_result vkrt_render(vkrt_context *ctx, vkrt_scene *scene, const vkrt_render_
     if (d.width > MAX_IMAGE_SIZE || d.height > MAX_IMAGE_SIZE)
         return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "image size %ux%u exceeds %u on a side", d.width, d.height,
                          MAX_IMAGE_SIZE);
-    if (d.mode > VKRT_MODE_ID) return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "vkrt_render_desc.mode has no valid value (%d)", (int)d.mode);
+    if (d.mode > VKRT_MODE_UV) return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "vkrt_render_desc.mode has no valid value (%d)", (int)d.mode);
     if (d.traversal > VKRT_TRAVERSAL_NAIVE)
         return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "vkrt_render_desc.traversal has no valid value (%d)", (int)d.traversal);
     if (d.heat > VKRT_HEAT_TRIS) return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "vkrt_render_desc.heat has no valid value (%d)", (int)d.heat);
@@ -292,6 +319,11 @@ vkrt_result vkrt_render(vkrt_context *ctx, vkrt_scene *scene, const vkrt_render_
     double t0 = core_now_ms();
     double trace_ms = 0.0;
     trace_counts counts = { 0 };
+    const bool reads_surfaces = mode == VKRT_MODE_ALBEDO || mode == VKRT_MODE_UV;
+    if (ctx->vk && reads_surfaces &&
+        (r = gpu_scene_upload_surfaces(ctx->vk, &scene->gpu, scene->surfaces, scene->materials,
+                                       scene->material_count)) != VKRT_OK)
+        return r;
     if (ctx->vk) {
         gpu_trace_params p = {
             .camera = camera, .mode = mode, .traversal = traversal, .heat = heat, .intersector = d.intersector,
@@ -302,6 +334,7 @@ vkrt_result vkrt_render(vkrt_context *ctx, vkrt_scene *scene, const vkrt_render_
         cpu_trace_scene s = {
             .nodes = scene->bvh.nodes, .node_count = scene->bvh.node_count,
             .tris = scene->tris, .tri_count = scene->bvh.tri_count,
+            .surfaces = scene->surfaces, .materials = scene->materials,
         };
         cpu_trace_params p = {
             .camera = camera, .mode = mode, .traversal = traversal, .heat = heat, .intersector = d.intersector,

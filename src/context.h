@@ -18,6 +18,9 @@ struct vkrt_scene {
     vkrt_context *ctx;
     bvh bvh;                   /* nodes and triangle order */
     vkrt_gpu_tri *tris;        /* packed in BVH order; the CPU backend traces these */
+    vkrt_gpu_surface *surfaces; /* per triangle by prim_id: texture coordinates, material */
+    vkrt_gpu_material *materials;
+    uint32_t material_count;
     gpu_scene gpu;             /* device copies (GPU backend) */
     vkrt_scene_stats stats;
 };

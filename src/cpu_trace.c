@@ -92,6 +92,24 @@ static void shade(const cpu_trace_scene *s, const cpu_trace_params *p, const hit
         if (is_hit) out[0] = (float)best->prim, out[1] = best->u, out[2] = best->v, out[3] = 1.0f;
         else out[0] = (float)VKRT_MISS, out[1] = 0.0f, out[2] = 0.0f, out[3] = 0.0f;
         return;
+    case VKRT_MODE_ALBEDO: {
+        out[0] = out[1] = out[2] = out[3] = 0.0f;
+        if (!is_hit) return;
+        const vkrt_gpu_material *m = &s->materials[s->surfaces[best->prim].material];
+        out[0] = m->base_color.x, out[1] = m->base_color.y, out[2] = m->base_color.z, out[3] = m->alpha;
+        return;
+    }
+    case VKRT_MODE_UV: {
+        out[0] = out[1] = out[2] = out[3] = 0.0f;
+        if (!is_hit) return;
+        /* Mirrors shade_uv() in shaders/trace.comp. */
+        const vkrt_gpu_surface *f = &s->surfaces[best->prim];
+        float w = 1.0f - best->u - best->v;
+        out[0] = (f->u0 * w + f->u1 * best->u) + f->u2 * best->v;
+        out[1] = (f->v0 * w + f->v1 * best->u) + f->v2 * best->v;
+        out[3] = 1.0f;
+        return;
+    }
     default: {
         if (!is_hit) {
             out[0] = out[1] = out[2] = out[3] = 0.0f;

@@ -15,6 +15,8 @@ typedef struct cpu_trace_scene {
     uint32_t node_count;
     const vkrt_gpu_tri *tris;
     uint32_t tri_count;
+    const vkrt_gpu_surface *surfaces;   /* by prim_id (albedo and uv modes) */
+    const vkrt_gpu_material *materials;
 } cpu_trace_scene;
 
 typedef struct cpu_trace_params {

@@ -40,6 +40,13 @@ vkrt_result gpu_scene_upload(vk_context *vk, const vkrt_gpu_node *nodes, uint32_
     if ((r = vk_buffer_create(vk, tri_bytes, usage, VK_MEMORY_DEVICE, "vkrt triangles", &out->tris)) != VKRT_OK) goto fail;
     if ((r = vk_buffer_upload(vk, &out->nodes, nodes, node_bytes)) != VKRT_OK) goto fail;
     if ((r = vk_buffer_upload(vk, &out->tris, tris, tri_bytes)) != VKRT_OK) goto fail;
+    /* Every binding needs a buffer; these stand in until a mode reads surfaces. */
+    if ((r = vk_buffer_create(vk, sizeof(vkrt_gpu_surface), usage, VK_MEMORY_DEVICE, "vkrt surfaces (placeholder)",
+                              &out->surfaces)) != VKRT_OK)
+        goto fail;
+    if ((r = vk_buffer_create(vk, sizeof(vkrt_gpu_material), usage, VK_MEMORY_DEVICE, "vkrt materials (placeholder)",
+                              &out->materials)) != VKRT_OK)
+        goto fail;
     out->node_count = node_count;
     out->tri_count = tri_count;
     return VKRT_OK;
@@ -52,6 +59,36 @@ void gpu_scene_destroy(vk_context *vk, gpu_scene *s)
 {
     vk_buffer_destroy(vk, &s->nodes);
     vk_buffer_destroy(vk, &s->tris);
+    vk_buffer_destroy(vk, &s->surfaces);
+    vk_buffer_destroy(vk, &s->materials);
+}
+
+vkrt_result gpu_scene_upload_surfaces(vk_context *vk, gpu_scene *s, const vkrt_gpu_surface *surfaces,
+                                      const vkrt_gpu_material *materials, uint32_t material_count)
+{
+    if (s->surfaces_uploaded) return VKRT_OK;
+    VkDeviceSize surface_bytes = (VkDeviceSize)s->tri_count * sizeof *surfaces;
+    VkDeviceSize material_bytes = (VkDeviceSize)material_count * sizeof *materials;
+    vkrt_result r;
+    if ((r = check_range(vk, surface_bytes, "surfaces")) != VKRT_OK) return r;
+    if ((r = check_range(vk, material_bytes, "materials")) != VKRT_OK) return r;
+    VkBufferUsageFlags usage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT;
+    vk_buffer fresh_surfaces = { 0 }, fresh_materials = { 0 };
+    r = vk_buffer_create(vk, surface_bytes, usage, VK_MEMORY_DEVICE, "vkrt surfaces", &fresh_surfaces);
+    if (r == VKRT_OK) r = vk_buffer_create(vk, material_bytes, usage, VK_MEMORY_DEVICE, "vkrt materials", &fresh_materials);
+    if (r == VKRT_OK) r = vk_buffer_upload(vk, &fresh_surfaces, surfaces, surface_bytes);
+    if (r == VKRT_OK) r = vk_buffer_upload(vk, &fresh_materials, materials, material_bytes);
+    if (r != VKRT_OK) {
+        vk_buffer_destroy(vk, &fresh_surfaces);
+        vk_buffer_destroy(vk, &fresh_materials);
+        return r;
+    }
+    vk_buffer_destroy(vk, &s->surfaces);
+    vk_buffer_destroy(vk, &s->materials);
+    s->surfaces = fresh_surfaces;
+    s->materials = fresh_materials;
+    s->surfaces_uploaded = true;
+    return VKRT_OK;
 }
 
 /* Per-call device objects: one tile-sized storage image (1x1 for rays), the readback buffer,
@@ -142,7 +179,7 @@ static vkrt_result create_descriptors(vk_context *vk, const gpu_scene *scene, Vk
                                       render_objects *o)
 {
     VkDescriptorPoolSize sizes[] = {
-        { VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 8 }, /* every binding but the image */
+        { VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 10 }, /* every binding but the image */
         { VK_DESCRIPTOR_TYPE_STORAGE_IMAGE, 1 },
     };
     VkDescriptorPoolCreateInfo pool_info = {
@@ -170,6 +207,7 @@ static vkrt_result create_descriptors(vk_context *vk, const gpu_scene *scene, Vk
         { VKRT_BINDING_HITS, o->hits.buffer },         { VKRT_BINDING_RAYS, o->rays.buffer },
         { VKRT_BINDING_RESUME, o->resume.buffer },     { VKRT_BINDING_RESUME_STACK, o->resume_stack.buffer },
         { VKRT_BINDING_UNFINISHED, o->unfinished.buffer },    { VKRT_BINDING_COUNTERS, o->counters.buffer },
+        { VKRT_BINDING_SURFACES, scene->surfaces.buffer },    { VKRT_BINDING_MATERIALS, scene->materials.buffer },
     };
     enum { BUFFERS = sizeof buffers / sizeof buffers[0] };
     VkDescriptorBufferInfo infos[BUFFERS];
@@ -247,6 +285,8 @@ static uint32_t gpu_mode(vkrt_mode m)
     case VKRT_MODE_DEPTH: return VKRT_GPU_MODE_DEPTH;
     case VKRT_MODE_HEATMAP: return VKRT_GPU_MODE_HEATMAP;
     case VKRT_MODE_ID: return VKRT_GPU_MODE_ID;
+    case VKRT_MODE_ALBEDO: return VKRT_GPU_MODE_ALBEDO;
+    case VKRT_MODE_UV: return VKRT_GPU_MODE_UV;
     default: return VKRT_GPU_MODE_NORMAL;
     }
 }

@@ -11,6 +11,10 @@
 typedef struct gpu_scene {
     vk_buffer nodes;
     vk_buffer tris;
+    vk_buffer surfaces;        /* vkrt_gpu_surface per triangle, and */
+    vk_buffer materials;       /* the material table: one-element placeholders until a render
+                                  needs them (gpu_scene_upload_surfaces) */
+    bool surfaces_uploaded;
     uint32_t node_count;
     uint32_t tri_count;
 } gpu_scene;
@@ -20,6 +24,12 @@ typedef struct gpu_scene {
 vkrt_result gpu_scene_upload(vk_context *vk, const vkrt_gpu_node *nodes, uint32_t node_count,
                              const vkrt_gpu_tri *tris, uint32_t tri_count, gpu_scene *out);
 void gpu_scene_destroy(vk_context *vk, gpu_scene *s);
+
+/* Uploads the surfaces (tri_count of them) and materials, replacing the placeholders; a no-op
+ * once done. The modes that read them call this first, so scenes rendered only in the others
+ * never hold them on the device. */
+vkrt_result gpu_scene_upload_surfaces(vk_context *vk, gpu_scene *s, const vkrt_gpu_surface *surfaces,
+                                      const vkrt_gpu_material *materials, uint32_t material_count);
 
 typedef struct gpu_trace_params {
     vkrt_gpu_push camera;      /* eye/right/up/forward/width/height filled by camera_setup */

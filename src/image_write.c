@@ -61,6 +61,14 @@ static void id_colour(uint32_t id, float rgb[3])
     rgb[2] = 0.25f + 0.75f * (float)((h >> 16) & 0xFF) / 255.0f;
 }
 
+/* The sRGB transfer function (IEC 61966-2-1) of a linear value in [0, 1]. */
+static float srgb_encode(float v)
+{
+    if (!(v > 0.0f)) return 0.0f;
+    if (v >= 1.0f) return 1.0f;
+    return v <= 0.0031308f ? 12.92f * v : 1.055f * powf(v, 1.0f / 2.4f) - 0.055f;
+}
+
 static void encode_rgb8(const vkrt_image_view *im, uint8_t *out)
 {
     const size_t pixels = (size_t)im->width * im->height;
@@ -89,6 +97,14 @@ static void encode_rgb8(const vkrt_image_view *im, uint8_t *out)
             break;
         case VKRT_MODE_HEATMAP:
             heat_ramp(p[0] / heat_max, rgb);
+            break;
+        case VKRT_MODE_ALBEDO:
+            /* Linear reflectance, shown as an sRGB image shows colour. */
+            for (int k = 0; k < 3; k++) rgb[k] = srgb_encode(p[k]);
+            break;
+        case VKRT_MODE_UV:
+            /* The fractional part: a texture's repeat wraps the same way. */
+            if (hit) rgb[0] = p[0] - floorf(p[0]), rgb[1] = p[1] - floorf(p[1]);
             break;
         default:
             if (hit) memcpy(rgb, p, sizeof rgb);

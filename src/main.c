@@ -95,7 +95,8 @@ static const char render_help[] =
     "options (defaults first):\n"
     "  -o, --output OUT          render.png; .png, .ppm (8-bit colour), .pfm (raw floats) or\n"
     "                            .hdr (raw values, Radiance RGBE)\n"
-    "  --mode normal|depth|heatmap|id\n"
+    "  --mode normal|depth|heatmap|id|albedo|uv\n"
+    "                            albedo: the material's base colour; uv: texture coordinates\n"
     "  --heat nodes|leaves|tris  what heatmap counts per ray\n"
     "  --heat-max N              count at the top of the heat ramp (default: the image maximum)\n"
     "  --backend gpu|cpu         Vulkan compute, or the C reference tracer\n"
@@ -308,7 +309,9 @@ static int parse_args(int argc, char **argv, options *o)
             else if (!strcmp(value, "depth")) o->render.mode = VKRT_MODE_DEPTH;
             else if (!strcmp(value, "heatmap")) o->render.mode = VKRT_MODE_HEATMAP;
             else if (!strcmp(value, "id")) o->render.mode = VKRT_MODE_ID;
-            else return usage_error("unknown mode '%s' (normal, depth, heatmap, id)", value);
+            else if (!strcmp(value, "albedo")) o->render.mode = VKRT_MODE_ALBEDO;
+            else if (!strcmp(value, "uv")) o->render.mode = VKRT_MODE_UV;
+            else return usage_error("unknown mode '%s' (normal, depth, heatmap, id, albedo, uv)", value);
         } else if (!strcmp(arg, "--heat")) {
             NEED_VALUE();
             if (!strcmp(value, "nodes")) o->render.heat = VKRT_HEAT_NODES;
@@ -436,7 +439,7 @@ static int check_validation(vkrt_context *ctx, const options *o)
 
 static const char *mode_name(vkrt_mode m)
 {
-    static const char *names[] = { "normal", "normal", "depth", "heatmap", "id" };
+    static const char *names[] = { "normal", "normal", "depth", "heatmap", "id", "albedo", "uv" };
     return names[m];
 }
 
@@ -619,6 +622,8 @@ static int command_info(options *o)
     printf("bytes         %" PRIu64 " (nodes %" PRIu64 ", triangles %" PRIu64 "; %.1f per triangle)\n",
            s.node_bytes + s.triangle_bytes, s.node_bytes, s.triangle_bytes,
            s.triangles ? (double)(s.node_bytes + s.triangle_bytes) / (double)s.triangles : 0.0);
+    printf("surfaces      %" PRIu64 " bytes (albedo and uv modes only): %u material%s, %s\n", s.surface_bytes,
+           s.materials, s.materials == 1 ? "" : "s", s.has_texcoords ? "texture coordinates" : "no texture coordinates");
     printf("bounds        (%g, %g, %g) - (%g, %g, %g)\n", s.bounds_min[0], s.bounds_min[1], s.bounds_min[2],
            s.bounds_max[0], s.bounds_max[1], s.bounds_max[2]);
     printf("leaf sizes   ");

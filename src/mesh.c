@@ -13,7 +13,14 @@
 #include <stdio.h>
 #include <string.h>
 
-/* Room for `needed` triangles in both corner arrays, which share one capacity. */
+/* One per-triangle array moved into a larger allocation (the first tri_count entries kept). */
+typedef struct grown {
+    void **array;
+    size_t per_triangle; /* bytes */
+    void *fresh;
+} grown;
+
+/* Room for `needed` triangles in every per-triangle array, which share one capacity. */
 static int reserve(core *c, mesh *m, size_t needed)
 {
     if (needed <= m->tri_capacity) return 0;
@@ -22,23 +29,62 @@ static int reserve(core *c, mesh *m, size_t needed)
         if (cap > SIZE_MAX / 2) return -1;
         cap *= 2;
     }
-    float *positions = core_alloc_array(c, cap, 9 * sizeof(float));
-    float *normals = core_alloc_array(c, cap, 9 * sizeof(float));
-    if (!positions || !normals) {
-        core_free(c, positions);
-        core_free(c, normals);
-        return -1;
+    grown arrays[] = {
+        { (void **)&m->positions, 9 * sizeof(float), NULL },
+        { (void **)&m->normals, 9 * sizeof(float), NULL },
+        { (void **)&m->texcoords, 6 * sizeof(float), NULL },
+        { (void **)&m->material_ids, sizeof(uint32_t), NULL },
+    };
+    enum { ARRAYS = sizeof arrays / sizeof arrays[0] };
+    bool ok = true;
+    for (int i = 0; i < ARRAYS; i++) ok = (arrays[i].fresh = core_alloc_array(c, cap, arrays[i].per_triangle)) && ok;
+    for (int i = 0; i < ARRAYS; i++) {
+        if (!ok) {
+            core_free(c, arrays[i].fresh);
+            continue;
+        }
+        if (m->tri_count) memcpy(arrays[i].fresh, *arrays[i].array, (size_t)m->tri_count * arrays[i].per_triangle);
+        core_free(c, *arrays[i].array);
+        *arrays[i].array = arrays[i].fresh;
     }
-    if (m->tri_count) {
-        memcpy(positions, m->positions, (size_t)m->tri_count * 9 * sizeof(float));
-        memcpy(normals, m->normals, (size_t)m->tri_count * 9 * sizeof(float));
-    }
-    core_free(c, m->positions);
-    core_free(c, m->normals);
-    m->positions = positions;
-    m->normals = normals;
+    if (!ok) return -1;
     m->tri_capacity = cap;
     return 0;
+}
+
+vkrt_result mesh_add_material(core *c, mesh *m, const vkrt_material *mat, vkrt_result invalid, const char *source,
+                              const char *what, uint32_t *out_index)
+{
+    const struct {
+        const char *name;
+        const float *values;
+        int count;
+        float max; /* INFINITY: no upper bound */
+    } fields[] = {
+        { "base_color", mat->base_color, 4, 1.0f },
+        { "metallic", &mat->metallic, 1, 1.0f },
+        { "roughness", &mat->roughness, 1, 1.0f },
+        { "emissive", mat->emissive, 3, INFINITY },
+    };
+    for (size_t f = 0; f < sizeof fields / sizeof fields[0]; f++)
+        for (int i = 0; i < fields[f].count; i++) {
+            float v = fields[f].values[i];
+            if (!(v >= 0.0f && v <= fields[f].max) || !isfinite(v))
+                return core_fail(c, invalid, "%s: %s: material %s[%d] is %g, outside [0, %g]", source, what,
+                                 fields[f].name, i, (double)v, (double)fields[f].max);
+        }
+    if (m->material_count == m->material_capacity) {
+        uint32_t cap = m->material_capacity ? m->material_capacity * 2 : 8;
+        vkrt_material *fresh = cap > m->material_capacity ? core_alloc_array(c, cap, sizeof *fresh) : NULL;
+        if (!fresh) return core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "%s: out of memory for %u materials", source, cap);
+        if (m->material_count) memcpy(fresh, m->materials, m->material_count * sizeof *fresh);
+        core_free(c, m->materials);
+        m->materials = fresh;
+        m->material_capacity = cap;
+    }
+    m->materials[m->material_count] = *mat;
+    *out_index = m->material_count++;
+    return VKRT_OK;
 }
 
 static bool finite3(const float *v)
@@ -134,7 +180,13 @@ vkrt_result mesh_append_indexed(core *c, mesh *m, const mesh_primitive *p, const
         if (p->normals && (bad = first_non_finite(p->normals + 3 * v)))
             return core_fail(c, VKRT_ERROR_INVALID_GEOMETRY, "%s: %s: the normal of vertex %zu is non-finite (%g)",
                              source, what, v, (double)*bad);
+        if (p->texcoords && (!isfinite(p->texcoords[2 * v]) || !isfinite(p->texcoords[2 * v + 1])))
+            return core_fail(c, VKRT_ERROR_INVALID_GEOMETRY,
+                             "%s: %s: the texture coordinates of vertex %zu are non-finite", source, what, v);
     }
+    if (p->material > m->material_count)
+        return core_fail(c, VKRT_ERROR_INVALID_GEOMETRY, "%s: %s: material %u of %u does not exist", source, what,
+                         p->material - 1, m->material_count);
     if (p->indices) {
         for (size_t i = 0; i < index_count; i++)
             if (p->indices[i] >= nv)
@@ -212,12 +264,31 @@ vkrt_result mesh_append_indexed(core *c, mesh *m, const mesh_primitive *p, const
         }
     }
 
+    uint32_t material = p->material - 1;
+    if (p->material == 0) {
+        if (!m->has_default_material) {
+            const vkrt_material fallback = vkrt_material_default();
+            if ((r = mesh_add_material(c, m, &fallback, VKRT_ERROR_INVALID_ARGUMENT, source, what,
+                                       &m->default_material)) != VKRT_OK)
+                goto done;
+            m->has_default_material = true;
+        }
+        material = m->default_material;
+    }
     if (reserve(c, m, (size_t)m->tri_count + tris) != 0) goto oom;
+    if (p->texcoords) m->has_texcoords = true;
     for (size_t t = 0; t < tris; t++) {
         uint32_t idx[3];
         for (int k = 0; k < 3; k++) idx[k] = p->indices ? p->indices[3 * t + k] : (uint32_t)(3 * t + k);
-        float *out_p = m->positions + ((size_t)m->tri_count + t) * 9;
-        float *out_n = m->normals + ((size_t)m->tri_count + t) * 9;
+        size_t out = (size_t)m->tri_count + t;
+        float *out_p = m->positions + out * 9;
+        float *out_n = m->normals + out * 9;
+        float *out_uv = m->texcoords + out * 6;
+        m->material_ids[out] = material;
+        for (int k = 0; k < 3; k++) {
+            out_uv[2 * k] = p->texcoords ? p->texcoords[2 * (size_t)idx[k]] : 0.0f;
+            out_uv[2 * k + 1] = p->texcoords ? p->texcoords[2 * (size_t)idx[k] + 1] : 0.0f;
+        }
         for (int k = 0; k < 3; k++) memcpy(out_p + 3 * k, pos + 3 * (size_t)idx[k], 3 * sizeof(float));
         double fallback[3];
         face_normal(out_p, out_p + 3, out_p + 6, sign, fallback);
@@ -301,6 +372,9 @@ void mesh_destroy(core *c, mesh *m)
     if (!m) return;
     core_free(c, m->positions);
     core_free(c, m->normals);
+    core_free(c, m->texcoords);
+    core_free(c, m->material_ids);
+    core_free(c, m->materials);
     memset(m, 0, sizeof *m);
 }
 

@@ -11,14 +11,27 @@
 #include <stdint.h>
 
 #include "core.h"
+#include "vkrt.h"
+
+/* mesh_primitive.material for the material mesh_add_material numbered `index`; 0 (a zeroed
+ * primitive) is the default material (vkrt_material_default), added to the table on first use. */
+#define MESH_MATERIAL(index) ((index) + 1u)
 
 typedef struct mesh {
     uint32_t tri_count;
     size_t tri_capacity;
     float *positions;        /* 9 floats per triangle: corners v0, v1, v2 */
     float *normals;          /* 9 floats per triangle: unit vertex normal at each corner */
+    float *texcoords;        /* 6 floats per triangle: (u, v) at each corner, (0, 0) without */
+    uint32_t *material_ids;  /* per triangle: index into materials */
     float bounds_min[3];     /* of all corners; valid when tri_count > 0 */
     float bounds_max[3];
+    bool has_texcoords;      /* some primitive brought texture coordinates */
+    vkrt_material *materials;
+    uint32_t material_count;
+    uint32_t material_capacity;
+    bool has_default_material; /* the default material is in the table, at default_material */
+    uint32_t default_material;
 } mesh;
 
 /* One indexed primitive handed to mesh_append_indexed(). */
@@ -30,10 +43,18 @@ typedef struct mesh_primitive {
     const float *normals;    /* 3 floats per vertex, or NULL: computed, angle-weighted */
     const float *transform;  /* column-major 4x4 applied to positions (normals by its inverse
                                 transpose), or NULL for identity */
+    const float *texcoords;  /* 2 floats per vertex, or NULL: (0, 0) */
+    uint32_t material;       /* MESH_MATERIAL(index from mesh_add_material); 0: the default */
 } mesh_primitive;
 
-/* Appends a primitive's triangles. Checks every coordinate is finite and every index is below
- * vertex_count; `source` (the file name) and `what` (e.g. "mesh 2 primitive 0") name the
+/* Adds a material to the table and returns its index in *out_index. A non-finite factor, or
+ * one outside its range (vkrt_material), fails with `invalid` (the caller's code: a file's
+ * or an argument's fault) and a message naming `source` and `what`. */
+vkrt_result mesh_add_material(core *c, mesh *m, const vkrt_material *material, vkrt_result invalid,
+                              const char *source, const char *what, uint32_t *out_index);
+
+/* Appends a primitive's triangles. Checks every coordinate (and texture coordinate) is
+ * finite, the material exists, and every index is below vertex_count; `source` (the file name) and `what` (e.g. "mesh 2 primitive 0") name the
  * culprit in the failure message: VKRT_ERROR_INVALID_GEOMETRY or VKRT_ERROR_OUT_OF_MEMORY. */
 vkrt_result mesh_append_indexed(core *c, mesh *m, const mesh_primitive *primitive,
                                 const char *source, const char *what);

@@ -1,6 +1,8 @@
 /* The scene shown when no file is given: an icosphere, a torus and a box standing in a row
  * on a ground plane. Sphere and torus carry their analytic (smooth) normals, box and plane
- * flat ones.
+ * flat ones; each object has a material of its own and texture coordinates (sphere:
+ * longitude and latitude, torus: around ring and tube, box: each face the unit square,
+ * ground: tiled).
  *
  * The default camera looks straight down -z from (0, 0, 1.5), so the whole arrangement is
  * tilted 30 degrees about x: the camera then sees the ground from 30 degrees above, the
@@ -112,15 +114,30 @@ static void orient(const float *positions, const float *normals, uint32_t *indic
     }
 }
 
-static vkrt_result append(core *c, mesh *m, const float *positions, const float *normals, size_t vertices,
-                          uint32_t *indices, size_t tris, mat4 transform, const char *what)
+/* One object of the scene with its own material. */
+typedef struct object_desc {
+    const float *positions, *normals, *texcoords;
+    size_t vertices;
+    uint32_t *indices;
+    size_t tris;
+    mat4 transform;
+    vkrt_material material;
+    const char *what;
+} object_desc;
+
+static vkrt_result append(core *c, mesh *m, const object_desc *o)
 {
-    orient(positions, normals, indices, tris);
+    orient(o->positions, o->normals, o->indices, o->tris);
+    uint32_t material;
+    vkrt_result r = mesh_add_material(c, m, &o->material, VKRT_ERROR_INVALID_ARGUMENT, "built-in scene", o->what,
+                                      &material);
+    if (r != VKRT_OK) return r;
     return mesh_append_indexed(c, m,
-                               &(mesh_primitive){ .positions = positions, .vertex_count = vertices,
-                                                  .indices = indices, .index_count = 3 * tris,
-                                                  .normals = normals, .transform = transform.m },
-                               "built-in scene", what);
+                               &(mesh_primitive){ .positions = o->positions, .vertex_count = o->vertices,
+                                                  .indices = o->indices, .index_count = 3 * o->tris,
+                                                  .normals = o->normals, .transform = o->transform.m,
+                                                  .texcoords = o->texcoords, .material = MESH_MATERIAL(material) },
+                               "built-in scene", o->what);
 }
 
 /* Unit icosphere: each level splits every triangle into four at its edge midpoints, pushed
@@ -140,8 +157,9 @@ static vkrt_result add_sphere(core *c, mesh *m, mat4 transform)
     vkrt_result r = VKRT_ERROR_OUT_OF_MEMORY;
     float *a = core_alloc_array(c, tris, 9 * sizeof(float));
     float *b = core_alloc_array(c, tris, 9 * sizeof(float));
+    float *uv = core_alloc_array(c, tris, 6 * sizeof(float));
     uint32_t *indices = core_alloc_array(c, tris, 3 * sizeof(uint32_t));
-    if (!a || !b || !indices) {
+    if (!a || !b || !uv || !indices) {
         r = core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "built-in scene: out of memory making the icosphere");
         goto done;
     }
@@ -172,12 +190,21 @@ static vkrt_result add_sphere(core *c, mesh *m, mat4 transform)
         a = b;
         b = swap;
     }
-    for (size_t i = 0; i < 3 * tris; i++) indices[i] = (uint32_t)i;
+    for (size_t i = 0; i < 3 * tris; i++) {
+        indices[i] = (uint32_t)i;
+        /* Longitude and latitude, each over [0, 1]. */
+        const float *p = a + 3 * i;
+        uv[2 * i] = (float)(atan2((double)p[2], (double)p[0]) / (2.0 * BUILTIN_PI) + 0.5);
+        uv[2 * i + 1] = (float)(acos(fmax(-1.0, fmin(1.0, (double)p[1]))) / BUILTIN_PI);
+    }
     /* On the unit sphere the position is the normal. */
-    r = append(c, m, a, a, 3 * tris, indices, tris, transform, "icosphere");
+    const object_desc o = { a, a, uv, 3 * tris, indices, tris, transform,
+                            { .base_color = { 0.80f, 0.22f, 0.18f, 1.0f }, .roughness = 0.4f }, "icosphere" };
+    r = append(c, m, &o);
 done:
     core_free(c, a);
     core_free(c, b);
+    core_free(c, uv);
     core_free(c, indices);
     return r;
 }
@@ -189,8 +216,9 @@ static vkrt_result add_torus(core *c, mesh *m, mat4 transform)
     vkrt_result r = VKRT_ERROR_OUT_OF_MEMORY;
     float *positions = core_alloc_array(c, vertices, 3 * sizeof(float));
     float *normals = core_alloc_array(c, vertices, 3 * sizeof(float));
+    float *uv = core_alloc_array(c, vertices, 2 * sizeof(float));
     uint32_t *indices = core_alloc_array(c, tris, 3 * sizeof(uint32_t));
-    if (!positions || !normals || !indices) {
+    if (!positions || !normals || !uv || !indices) {
         r = core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "built-in scene: out of memory making the torus");
         goto done;
     }
@@ -202,6 +230,8 @@ static vkrt_result add_torus(core *c, mesh *m, mat4 transform)
             set3(normals + 3 * k, cos(u) * cos(v), sin(v), sin(u) * cos(v));
             double ring = TORUS_MAJOR + TORUS_MINOR * cos(v);
             set3(positions + 3 * k, ring * cos(u), TORUS_MINOR * sin(v), ring * sin(u));
+            uv[2 * k] = (float)i / (float)nu; /* around the ring, around the tube */
+            uv[2 * k + 1] = (float)j / (float)nv;
         }
     }
     uint32_t *out = indices;
@@ -213,10 +243,14 @@ static vkrt_result add_torus(core *c, mesh *m, mat4 transform)
             memcpy(out, quad, sizeof quad);
             out += 6;
         }
-    r = append(c, m, positions, normals, vertices, indices, tris, transform, "torus");
+    const object_desc o = { positions, normals, uv, vertices, indices, tris, transform,
+                            { .base_color = { 1.0f, 0.78f, 0.34f, 1.0f }, .metallic = 1.0f, .roughness = 0.3f },
+                            "torus" };
+    r = append(c, m, &o);
 done:
     core_free(c, positions);
     core_free(c, normals);
+    core_free(c, uv);
     core_free(c, indices);
     return r;
 }
@@ -224,7 +258,7 @@ done:
 /* Axis-aligned box [-1, 1]^3 with 4 vertices per face, so each face keeps its own normal. */
 static vkrt_result add_box(core *c, mesh *m, mat4 transform)
 {
-    float positions[24 * 3], normals[24 * 3];
+    float positions[24 * 3], normals[24 * 3], uv[24 * 2];
     uint32_t indices[36];
     for (int face = 0; face < 6; face++) {
         int axis = face / 2;
@@ -238,11 +272,15 @@ static vkrt_result add_box(core *c, mesh *m, mat4 transform)
             p[v] = corners[k][1];
             n[axis] = s;
             n[u] = n[v] = 0.0f;
+            uv[2 * (4 * face + k)] = 0.5f * (corners[k][0] + 1.0f); /* each face the whole square */
+            uv[2 * (4 * face + k) + 1] = 0.5f * (corners[k][1] + 1.0f);
         }
         const uint32_t base = (uint32_t)(4 * face), quad[6] = { base, base + 1, base + 2, base, base + 2, base + 3 };
         memcpy(indices + 6 * face, quad, sizeof quad);
     }
-    return append(c, m, positions, normals, 24, indices, 12, transform, "box");
+    const object_desc o = { positions, normals, uv, 24, indices, 12, transform,
+                            { .base_color = { 0.18f, 0.32f, 0.78f, 1.0f }, .roughness = 0.6f }, "box" };
+    return append(c, m, &o);
 }
 
 static vkrt_result add_ground(core *c, mesh *m, mat4 transform)
@@ -250,8 +288,11 @@ static vkrt_result add_ground(core *c, mesh *m, mat4 transform)
     const float x = GROUND_HALF_X, z = GROUND_HALF_Z;
     float positions[12] = { -x, 0, z, x, 0, z, x, 0, -z, -x, 0, -z };
     float normals[12] = { 0, 1, 0, 0, 1, 0, 0, 1, 0, 0, 1, 0 };
+    float uv[8] = { 0, 0, 4, 0, 4, 3, 0, 3 }; /* tiles of about one unit */
     uint32_t indices[6] = { 0, 1, 2, 0, 2, 3 };
-    return append(c, m, positions, normals, 4, indices, 2, transform, "ground plane");
+    const object_desc o = { positions, normals, uv, 4, indices, 2, transform,
+                            { .base_color = { 0.70f, 0.70f, 0.68f, 1.0f }, .roughness = 1.0f }, "ground plane" };
+    return append(c, m, &o);
 }
 
 vkrt_result mesh_make_builtin(core *c, mesh *m)

@@ -171,7 +171,39 @@ typedef struct gltf_walk {
     mesh *m;
     size_t skipped_primitives; /* points and lines */
     size_t triangle_primitives;
+    uint32_t *materials;       /* per glTF material: MESH_MATERIAL(its index in m), 0 until a
+                                  primitive uses it */
 } gltf_walk;
+
+/* The mesh material of a primitive's glTF material, added on first use; 0 (the default) for a
+ * primitive without one. Factors follow the glTF 2.0 defaults where absent; the emissive
+ * strength of KHR_materials_emissive_strength scales the emissive factor. */
+static vkrt_result primitive_material(gltf_walk *w, const cgltf_primitive *prim, uint32_t *out)
+{
+    *out = 0;
+    if (!prim->material) return VKRT_OK;
+    size_t k = (size_t)(prim->material - w->data->materials);
+    if (w->materials[k]) {
+        *out = w->materials[k];
+        return VKRT_OK;
+    }
+    const cgltf_material *g = prim->material;
+    vkrt_material mat = { .base_color = { 1.0f, 1.0f, 1.0f, 1.0f }, .metallic = 1.0f, .roughness = 1.0f };
+    if (g->has_pbr_metallic_roughness) {
+        memcpy(mat.base_color, g->pbr_metallic_roughness.base_color_factor, sizeof mat.base_color);
+        mat.metallic = g->pbr_metallic_roughness.metallic_factor;
+        mat.roughness = g->pbr_metallic_roughness.roughness_factor;
+    }
+    float strength = g->has_emissive_strength ? g->emissive_strength.emissive_strength : 1.0f;
+    for (int i = 0; i < 3; i++) mat.emissive[i] = g->emissive_factor[i] * strength;
+    char what[64];
+    snprintf(what, sizeof what, "material %zu", k);
+    uint32_t index;
+    vkrt_result r = mesh_add_material(w->c, w->m, &mat, VKRT_ERROR_PARSE, w->path, what, &index);
+    if (r != VKRT_OK) return r;
+    *out = w->materials[k] = MESH_MATERIAL(index);
+    return VKRT_OK;
+}
 
 /* Triangle list indices for a primitive; strips and fans follow the winding rules of the
  * glTF 2.0 specification (section 3.7.2.1), so every triangle faces the same way. */
@@ -243,13 +275,18 @@ static vkrt_result append_primitive(gltf_walk *w, const cgltf_primitive *prim, s
         return core_fail(c, VKRT_ERROR_PARSE, "%s: %s: POSITION is not a VEC3 accessor", w->path, what);
     const cgltf_accessor *nrm = find_attribute(prim, cgltf_attribute_type_normal);
     if (nrm && (nrm->type != cgltf_type_vec3 || nrm->count != pos->count)) nrm = NULL; /* computed instead */
-    const cgltf_accessor *checks[3] = { pos, nrm, prim->indices };
-    for (int i = 0; i < 3; i++) {
+    const cgltf_accessor *uv = find_attribute(prim, cgltf_attribute_type_texcoord);
+    if (uv && (uv->type != cgltf_type_vec2 || uv->count != pos->count)) {
+        core_log(c, VKRT_LOG_WARN, "%s: %s: TEXCOORD_0 is not a VEC2 per vertex; ignored", w->path, what);
+        uv = NULL;
+    }
+    const cgltf_accessor *checks[4] = { pos, nrm, prim->indices, uv };
+    static const char *const check_names[4] = { "POSITION", "NORMAL", "the index accessor", "TEXCOORD_0" };
+    for (int i = 0; i < 4; i++) {
         if (checks[i] && !accessor_loaded(checks[i])) {
             bool meshopt = checks[i]->buffer_view && checks[i]->buffer_view->has_meshopt_compression;
             return core_fail(c, meshopt ? VKRT_ERROR_UNSUPPORTED : VKRT_ERROR_PARSE, "%s: %s: %s has no buffer data%s",
-                             w->path, what, i == 0 ? "POSITION" : i == 1 ? "NORMAL" : "the index accessor",
-                             meshopt ? " (EXT_meshopt_compression is not supported)" : "");
+                             w->path, what, check_names[i], meshopt ? " (EXT_meshopt_compression is not supported)" : "");
         }
     }
     if (prim->indices && prim->indices->is_sparse)
@@ -257,13 +294,16 @@ static vkrt_result append_primitive(gltf_walk *w, const cgltf_primitive *prim, s
     if (pos->count > UINT32_MAX)
         return core_fail(c, VKRT_ERROR_LIMIT, "%s: %s: more than %u vertices", w->path, what, UINT32_MAX);
 
-    vkrt_result r = VKRT_ERROR_OUT_OF_MEMORY;
+    uint32_t material;
+    vkrt_result r = primitive_material(w, prim, &material);
+    if (r != VKRT_OK) return r;
     size_t nv = pos->count;
     float *positions = core_alloc_array(c, nv, 3 * sizeof(float));
     float *normals = nrm ? core_alloc_array(c, nv, 3 * sizeof(float)) : NULL;
+    float *texcoords = uv ? core_alloc_array(c, nv, 2 * sizeof(float)) : NULL;
     uint32_t *indices = NULL;
     size_t index_count = 0;
-    if (!positions || (nrm && !normals)) {
+    if (!positions || (nrm && !normals) || (uv && !texcoords)) {
         r = core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "%s: %s: out of memory", w->path, what);
         goto done;
     }
@@ -277,15 +317,21 @@ static vkrt_result append_primitive(gltf_walk *w, const cgltf_primitive *prim, s
         r = core_fail(c, VKRT_ERROR_PARSE, "%s: %s: NORMAL cannot be read", w->path, what);
         goto done;
     }
+    if (uv && nv && cgltf_accessor_unpack_floats(uv, texcoords, nv * 2) != nv * 2) {
+        r = core_fail(c, VKRT_ERROR_PARSE, "%s: %s: TEXCOORD_0 cannot be read", w->path, what);
+        goto done;
+    }
     size_t count = prim->indices ? prim->indices->count : nv;
     if ((r = build_indices(w, prim, count, what, &indices, &index_count)) != VKRT_OK) goto done;
     r = mesh_append_indexed(c, w->m,
                             &(mesh_primitive){ .positions = positions, .vertex_count = nv, .indices = indices,
-                                               .index_count = index_count, .normals = normals, .transform = world },
+                                               .index_count = index_count, .normals = normals, .transform = world,
+                                               .texcoords = texcoords, .material = material },
                             w->path, what);
 done:
     core_free(c, positions);
     core_free(c, normals);
+    core_free(c, texcoords);
     core_free(c, indices);
     return r;
 }
@@ -658,7 +704,15 @@ vkrt_result mesh_load_gltf(core *c, const char *path, mesh *m)
             if (roots[i]) roots[root_count++] = i;
     }
     gltf_walk w = { .c = c, .path = path, .data = data, .m = m };
-    if ((r = walk_nodes(&w, &h, roots, root_count)) != VKRT_OK) goto done;
+    w.materials = core_calloc_array(c, data->materials_count ? data->materials_count : 1, sizeof *w.materials);
+    if (!w.materials) {
+        r = core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "%s: out of memory", path);
+        goto done;
+    }
+    r = walk_nodes(&w, &h, roots, root_count);
+    core_free(c, w.materials);
+    w.materials = NULL;
+    if (r != VKRT_OK) goto done;
     if (m->tri_count == 0) {
         if (w.skipped_primitives && !w.triangle_primitives)
             r = core_fail(c, VKRT_ERROR_EMPTY_SCENE, "%s: has only points or lines (%zu primitives), no triangles", path,

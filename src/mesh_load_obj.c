@@ -10,6 +10,7 @@
 
 #include <errno.h>
 #include <math.h>
+#include <stddef.h>
 #include <stdio.h>
 #include <string.h>
 
@@ -18,6 +19,7 @@
 typedef struct obj_tri {
     int64_t v[3];  /* 0-based position indices, range-checked after parsing */
     int64_t vn[3]; /* 0-based normal indices, or -1 where the face has no complete set */
+    int64_t vt[3]; /* 0-based texture coordinate indices, or -1 likewise */
     size_t face;   /* 1-based `f` statement it came from */
 } obj_tri;
 
@@ -31,6 +33,8 @@ typedef struct obj_state {
     size_t position_count, position_capacity;
     float *normals;
     size_t normal_count, normal_capacity;
+    float *texcoords;      /* `vt` as (u, v, 0) triples */
+    size_t texcoord_count, texcoord_capacity;
     obj_tri *tris;
     size_t tri_count, tri_capacity;
     size_t *object_starts; /* first triangle of each `o`/`g` run */
@@ -190,6 +194,13 @@ static void on_normal(void *user, float x, float y, float z)
                 "normals");
 }
 
+static void on_texcoord(void *user, float u, float v)
+{
+    obj_state *s = user;
+    push_triple(s, &s->texcoords, &s->texcoord_count, &s->texcoord_capacity, (const float[3]){ u, v, 0.0f }, "vt",
+                "texture coordinate", "texture coordinates");
+}
+
 /* 1-based or negative (relative) OBJ index to 0-based; false for 0, which OBJ does not allow
  * (tinyobjloader also yields 0 for a missing or non-numeric index). */
 static bool resolve(int raw, size_t count, int64_t *out)
@@ -209,7 +220,7 @@ static void on_face(void *user, const tinyobj_shim_corner *corners, size_t count
         s->short_faces++;
         return;
     }
-    bool all_normals = true;
+    bool all_normals = true, all_texcoords = true;
     for (size_t k = 0; k < count; k++) {
         int64_t v;
         if (!resolve(corners[k].v, s->position_count, &v) || v < 0) {
@@ -228,14 +239,17 @@ static void on_face(void *user, const tinyobj_shim_corner *corners, size_t count
          * computed normals, and only positions must be right. */
         int64_t vn;
         if (corners[k].vn == 0 || (resolve(corners[k].vn, s->normal_count, &vn) && vn < 0)) all_normals = false;
+        int64_t vt; /* likewise for texture coordinates: without a complete set, (0, 0) */
+        if (corners[k].vt == 0 || (resolve(corners[k].vt, s->texcoord_count, &vt) && vt < 0)) all_texcoords = false;
     }
     if (core_grow(s->c, (void **)&s->tris, &s->tri_capacity, s->tri_count + (count - 2), sizeof *s->tris)) {
         fail_in_callback(s, core_fail(s->c, VKRT_ERROR_OUT_OF_MEMORY, "%s: out of memory reading faces", s->path));
         return;
     }
-    int64_t v0 = -1, vn0 = -1; /* resolve() set them for every corner above */
+    int64_t v0 = -1, vn0 = -1, vt0 = -1; /* resolve() set them for every corner above */
     resolve(corners[0].v, s->position_count, &v0);
     if (all_normals) resolve(corners[0].vn, s->normal_count, &vn0);
+    if (all_texcoords) resolve(corners[0].vt, s->texcoord_count, &vt0);
     for (size_t k = 1; k + 1 < count; k++) {
         obj_tri *t = &s->tris[s->tri_count++];
         t->face = face;
@@ -247,6 +261,12 @@ static void on_face(void *user, const tinyobj_shim_corner *corners, size_t count
         if (all_normals) {
             resolve(corners[k].vn, s->normal_count, &t->vn[1]);
             resolve(corners[k + 1].vn, s->normal_count, &t->vn[2]);
+        }
+        t->vt[0] = vt0;
+        t->vt[1] = t->vt[2] = -1;
+        if (all_texcoords) {
+            resolve(corners[k].vt, s->texcoord_count, &t->vt[1]);
+            resolve(corners[k + 1].vt, s->texcoord_count, &t->vt[2]);
         }
     }
 }
@@ -338,12 +358,38 @@ static vkrt_result append_object(obj_state *s, mesh *m, size_t first, size_t las
             for (int j = 0; j < 3; j++) out[j] = (float)(n[j] / len);
         }
     }
+    /* And their texture coordinates, where a face gives one per corner. */
+    for (size_t t = 0; t < tris; t++) {
+        const obj_tri *src = &s->tris[first + t];
+        if (src->vt[0] < 0) continue;
+        m->has_texcoords = true;
+        for (int k = 0; k < 3; k++) {
+            const float *uv = s->texcoords + 3 * (size_t)src->vt[k];
+            m->texcoords[(base + t) * 6 + 2 * k] = uv[0];
+            m->texcoords[(base + t) * 6 + 2 * k + 1] = uv[1];
+        }
+    }
 done:
     for (size_t t = 0; t < tris; t++)
         for (int k = 0; k < 3; k++) remap[(size_t)s->tris[first + t].v[k]] = UINT32_MAX;
     core_free(c, indices);
     core_free(c, local);
     return r;
+}
+
+/* Clears (to -1) the three indices at `member` (offsetof vn or vt) of every triangle that names
+ * one at or past `defined`; returns how many triangles lost theirs. */
+static size_t drop_undefined(obj_state *s, size_t member, size_t defined)
+{
+    size_t dropped = 0;
+    for (size_t t = 0; t < s->tri_count; t++) {
+        int64_t *index = (int64_t *)((char *)&s->tris[t] + member);
+        if (index[0] >= (int64_t)defined || index[1] >= (int64_t)defined || index[2] >= (int64_t)defined) {
+            index[0] = index[1] = index[2] = -1;
+            dropped++;
+        }
+    }
+    return dropped;
 }
 
 static vkrt_result check_indices(obj_state *s)
@@ -358,20 +404,18 @@ static vkrt_result check_indices(obj_state *s)
                                  (long long)tri->v[k] + 1, s->position_count);
         }
     }
-    /* Normals may be defined after the face that names them, so faces naming a normal past
-     * the end are known only now; they fall back to computed normals (see on_face). */
-    size_t dropped = 0;
-    for (size_t t = 0; t < s->tri_count; t++) {
-        obj_tri *tri = &s->tris[t];
-        if (tri->vn[0] >= (int64_t)s->normal_count || tri->vn[1] >= (int64_t)s->normal_count ||
-            tri->vn[2] >= (int64_t)s->normal_count) {
-            tri->vn[0] = tri->vn[1] = tri->vn[2] = -1;
-            dropped++;
-        }
-    }
+    /* Normals and texture coordinates may be defined after the face that names them, so faces
+     * naming one past the end are known only now; they fall back to computed normals and to
+     * (0, 0) (see on_face). */
+    size_t dropped = drop_undefined(s, offsetof(obj_tri, vn), s->normal_count);
     if (dropped)
         core_log(s->c, VKRT_LOG_WARN, "%s: %zu triangles name normals the file does not define; computed instead",
                  s->path, dropped);
+    dropped = drop_undefined(s, offsetof(obj_tri, vt), s->texcoord_count);
+    if (dropped)
+        core_log(s->c, VKRT_LOG_WARN,
+                 "%s: %zu triangles name texture coordinates the file does not define; (0, 0) instead", s->path,
+                 dropped);
     return VKRT_OK;
 }
 
@@ -402,8 +446,8 @@ vkrt_result mesh_load_obj(core *c, const char *path, mesh *m)
     char message[256];
     tinyobj_shim_status status = tinyobj_shim_parse(
         text, size,
-        &(tinyobj_shim_callbacks){ .user = &s, .vertex = on_vertex, .normal = on_normal, .face = on_face,
-                                   .group = on_group },
+        &(tinyobj_shim_callbacks){ .user = &s, .vertex = on_vertex, .normal = on_normal, .texcoord = on_texcoord,
+                                   .face = on_face, .group = on_group },
         message, sizeof message);
     if (s.error) {
         r = s.error;
@@ -457,6 +501,7 @@ done:
     core_free(c, text);
     core_free(c, s.positions);
     core_free(c, s.normals);
+    core_free(c, s.texcoords);
     core_free(c, s.tris);
     core_free(c, s.object_starts);
     return r;

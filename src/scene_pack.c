@@ -82,3 +82,21 @@ void scene_pack_triangles(const mesh *m, const bvh *b, vkrt_gpu_tri *tris)
         t->n2 = normal_encode_oct(nrm + 6);
     }
 }
+
+void scene_pack_surfaces(const mesh *m, vkrt_gpu_surface *surfaces, vkrt_gpu_material *materials)
+{
+    for (uint32_t t = 0; t < m->tri_count; t++) {
+        const float *uv = m->texcoords + (size_t)t * 6;
+        surfaces[t] = (vkrt_gpu_surface){ uv[0], uv[1], uv[2], uv[3], uv[4], uv[5], m->material_ids[t], 0u };
+    }
+    for (uint32_t i = 0; i < m->material_count; i++) {
+        const vkrt_material *x = &m->materials[i];
+        materials[i] = (vkrt_gpu_material){
+            .base_color = { x->base_color[0], x->base_color[1], x->base_color[2] },
+            .alpha = x->base_color[3],
+            .emissive = { x->emissive[0], x->emissive[1], x->emissive[2] },
+            .metallic = x->metallic,
+            .roughness = x->roughness,
+        };
+    }
+}

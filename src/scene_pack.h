@@ -12,6 +12,9 @@
 /* tris must hold m->tri_count entries. */
 void scene_pack_triangles(const mesh *m, const bvh *b, vkrt_gpu_tri *tris);
 
+/* surfaces (m->tri_count, in load order: index = prim_id) and materials (m->material_count). */
+void scene_pack_surfaces(const mesh *m, vkrt_gpu_surface *surfaces, vkrt_gpu_material *materials);
+
 /* Unit vector -> two 16-bit snorm values (x in the low half); decode is the exact inverse
  * used by the shader (normal_decode in shaders/trace_common.glsl). */
 uint32_t normal_encode_oct(const float n[3]);

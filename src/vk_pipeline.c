@@ -7,9 +7,9 @@
 #include "../shaders/vkrt_shared.h"
 #include "shaders_embedded.h"
 
-/* Images: (3 modes + 3 heat kinds) x 2 traversals x 2 intersectors x counters on or off;
+/* Images: (5 modes + 3 heat kinds) x 2 traversals x 2 intersectors x counters on or off;
  * rays: 2 x 2 more. */
-#define MAX_VARIANTS 64
+#define MAX_VARIANTS 96
 
 typedef struct vk_pipelines {
     VkShaderModule trace_module;
@@ -88,6 +88,8 @@ static vkrt_result create_layouts(vk_context *vk, vk_pipelines *p)
         { VKRT_BINDING_RESUME_STACK, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, VK_SHADER_STAGE_COMPUTE_BIT, NULL },
         { VKRT_BINDING_UNFINISHED, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, VK_SHADER_STAGE_COMPUTE_BIT, NULL },
         { VKRT_BINDING_COUNTERS, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, VK_SHADER_STAGE_COMPUTE_BIT, NULL },
+        { VKRT_BINDING_SURFACES, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, VK_SHADER_STAGE_COMPUTE_BIT, NULL },
+        { VKRT_BINDING_MATERIALS, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, VK_SHADER_STAGE_COMPUTE_BIT, NULL },
     };
     VkDescriptorSetLayoutCreateInfo set_info = {
         .sType = VK_STRUCTURE_TYPE_DESCRIPTOR_SET_LAYOUT_CREATE_INFO,

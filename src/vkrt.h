@@ -148,6 +148,19 @@ typedef enum vkrt_bvh_builder {
     VKRT_BVH_BUILDER_BINNED_SAH   /* surface area heuristic over 32 bins per axis */
 } vkrt_bvh_builder;
 
+/* How a surface looks, in the glTF 2.0 metallic-roughness model (factors; all linear). The
+ * `albedo` mode shows base_color; lighting modes shade with all of it. */
+typedef struct vkrt_material {
+    float base_color[4]; /* RGB reflectance and alpha, each in [0, 1] */
+    float metallic;      /* [0, 1]: 0 dielectric, 1 metal */
+    float roughness;     /* [0, 1]: 0 mirror-smooth, 1 fully rough */
+    float emissive[3];   /* emitted radiance, >= 0 */
+} vkrt_material;
+
+/* The material of a mesh that names none: grey diffuse (base colour 0.8, alpha 1, metallic
+ * 0, roughness 1, no emission), glTF's default with a grey instead of a white base. */
+vkrt_material vkrt_material_default(void);
+
 /* One mesh held in memory by the caller (all arrays borrowed for the vkrt_scene_create call). */
 typedef struct vkrt_mesh_desc {
     const float *positions;       /* 3 floats per vertex; must be finite */
@@ -159,6 +172,8 @@ typedef struct vkrt_mesh_desc {
                                      angle-weighted */
     const float *transform;       /* column-major 4x4 placing the mesh in the scene; NULL
                                      (default): identity */
+    const float *texcoords;       /* 2 floats per vertex (u, v), finite; NULL (default): (0, 0) */
+    const vkrt_material *material;/* NULL (default): vkrt_material_default() */
 } vkrt_mesh_desc;
 
 typedef struct vkrt_scene_desc {
@@ -197,6 +212,11 @@ typedef struct vkrt_scene_stats {
     double load_ms, build_ms;      /* wall-clock times of parsing and BVH construction */
     uint64_t node_bytes, triangle_bytes; /* device (and CPU backend) buffers */
     float bounds_min[3], bounds_max[3];  /* of the scene as traced */
+    uint32_t materials;            /* distinct materials, the default included where used */
+    bool has_texcoords;            /* some triangle has texture coordinates */
+    uint64_t surface_bytes;        /* texture coordinates and material per triangle, and the
+                                      material table: on the device only once a render needs
+                                      them (albedo and uv modes) */
 } vkrt_scene_stats;
 
 vkrt_result vkrt_scene_stats_get(const vkrt_scene *scene, vkrt_scene_stats *out_stats);
@@ -208,7 +228,10 @@ typedef enum vkrt_mode {
     VKRT_MODE_NORMAL,      /* rgb = shading normal * 0.5 + 0.5; a = 1 on a hit, 0 on a miss */
     VKRT_MODE_DEPTH,       /* r = distance to the hit along the unit ray, -1 on a miss */
     VKRT_MODE_HEATMAP,     /* r = boxes entered / leaves entered / triangles tested (vkrt_heat) */
-    VKRT_MODE_ID           /* r = triangle index in the loaded file (exact), -1 on a miss */
+    VKRT_MODE_ID,          /* r = triangle index in the loaded file (exact), -1 on a miss */
+    VKRT_MODE_ALBEDO,      /* rgba = the hit material's base colour (linear) and alpha; 0 on a miss */
+    VKRT_MODE_UV           /* rg = texture coordinates interpolated at the hit, b = 0, a = 1 on a
+                              hit; 0 on a miss */
 } vkrt_mode;
 
 typedef enum vkrt_traversal {

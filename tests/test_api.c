@@ -143,10 +143,14 @@ static const uint32_t quad_indices[] = { 0, 1, 2, 0, 2, 3 };
 static const float shift[16] = { 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 2, 1 };
 static const float tri_positions[] = { 0, 0, 1, 1, 0, 1, 0, 1, 1 };
 
+static const float quad_texcoords[] = { 0, 0, 1, 0, 1, 1, 0, 1 };
+
 static vkrt_result op_scene_memory(vkrt_context *ctx, long n)
 {
+    const vkrt_material gold = { .base_color = { 1.0f, 0.78f, 0.34f, 1.0f }, .metallic = 1.0f, .roughness = 0.3f };
     vkrt_mesh_desc meshes[2] = {
-        { .positions = quad_positions, .vertex_count = 4, .indices = quad_indices, .index_count = 6, .transform = shift },
+        { .positions = quad_positions, .vertex_count = 4, .indices = quad_indices, .index_count = 6, .transform = shift,
+          .texcoords = quad_texcoords, .material = &gold },
         { .positions = tri_positions, .vertex_count = 3 },
     };
     return scene_op(ctx, n, &(vkrt_scene_desc){ .meshes = meshes, .mesh_count = 2 });
@@ -177,6 +181,12 @@ static vkrt_result render_op(vkrt_context *ctx, long n, vkrt_mode mode, const ch
 static vkrt_result op_render(vkrt_context *ctx, long n)
 {
     return render_op(ctx, n, VKRT_MODE_NORMAL, NULL);
+}
+
+/* Albedo: on the GPU the first such render uploads the surfaces. */
+static vkrt_result op_render_albedo(vkrt_context *ctx, long n)
+{
+    return render_op(ctx, n, VKRT_MODE_ALBEDO, NULL);
 }
 
 static char save_dir[] = "/tmp/vkrt_test_api_XXXXXX";
@@ -216,6 +226,7 @@ static void out_of_memory_at_every_cpu_allocation(void)
     oom_every_allocation("scene_create (instanced.gltf)", VKRT_BACKEND_CPU, op_scene_gltf);
     oom_every_allocation("scene_create (in-memory meshes)", VKRT_BACKEND_CPU, op_scene_memory);
     oom_every_allocation("render (CPU)", VKRT_BACKEND_CPU, op_render);
+    oom_every_allocation("render albedo (CPU)", VKRT_BACKEND_CPU, op_render_albedo);
     oom_every_allocation("image_save (.png)", VKRT_BACKEND_CPU, op_save_png);
     oom_every_allocation("image_save (.pfm)", VKRT_BACKEND_CPU, op_save_pfm);
     oom_every_allocation("image_save (.hdr)", VKRT_BACKEND_CPU, op_save_hdr);
@@ -226,6 +237,7 @@ static void out_of_memory_at_every_gpu_allocation(void)
     context_create_oom(VKRT_BACKEND_GPU);
     oom_every_allocation("scene_create (built-in, GPU)", VKRT_BACKEND_GPU, op_scene_builtin);
     oom_every_allocation("render (GPU)", VKRT_BACKEND_GPU, op_render);
+    oom_every_allocation("render albedo (GPU, surfaces uploaded)", VKRT_BACKEND_GPU, op_render_albedo);
 }
 
 /* ---- misuse ---- */
@@ -310,6 +322,28 @@ static void scene_misuse_returns_the_exact_code(void)
           VKRT_ERROR_INVALID_GEOMETRY);
     CHECK(make_memory_scene(ctx, &(vkrt_mesh_desc){ .positions = tri_positions, .vertex_count = 3, .indices = two_indices, .index_count = 2 }, &s) ==
           VKRT_ERROR_INVALID_GEOMETRY);
+    float nan_uv[] = { 0, 0, 1, NAN, 0, 1 };
+    CHECK(make_memory_scene(ctx, &(vkrt_mesh_desc){ .positions = tri_positions, .vertex_count = 3, .texcoords = nan_uv }, &s) ==
+          VKRT_ERROR_INVALID_GEOMETRY);
+    CHECK(strstr(vkrt_context_last_error(ctx), "texture coordinates") != NULL);
+    /* Materials out of their ranges (vkrt_material) name the field. */
+    const struct {
+        vkrt_material material;
+        const char *field;
+    } bad_materials[] = {
+        { { .base_color = { 0.5f, 0.5f, 1.5f, 1.0f } }, "base_color[2]" },
+        { { .base_color = { 0.5f, 0.5f, 0.5f, NAN } }, "base_color[3]" },
+        { { .base_color = { 0.5f, 0.5f, 0.5f, 1.0f }, .metallic = -0.25f }, "metallic" },
+        { { .base_color = { 0.5f, 0.5f, 0.5f, 1.0f }, .roughness = INFINITY }, "roughness" },
+        { { .base_color = { 0.5f, 0.5f, 0.5f, 1.0f }, .emissive = { 0, -1, 0 } }, "emissive[1]" },
+    };
+    for (size_t i = 0; i < sizeof bad_materials / sizeof bad_materials[0]; i++) {
+        vkrt_mesh_desc md = { .positions = tri_positions, .vertex_count = 3, .material = &bad_materials[i].material };
+        CHECK_MSG(make_memory_scene(ctx, &md, &s) == VKRT_ERROR_INVALID_ARGUMENT && s == NULL, "bad material %zu", i);
+        CHECK_MSG(strstr(vkrt_context_last_error(ctx), bad_materials[i].field) &&
+                      strstr(vkrt_context_last_error(ctx), "meshes[0]"),
+                  "bad material %zu: '%s'", i, vkrt_context_last_error(ctx));
+    }
     CHECK(make_memory_scene(ctx, &(vkrt_mesh_desc){ .positions = NULL, .vertex_count = 3 }, &s) == VKRT_ERROR_INVALID_ARGUMENT);
     CHECK(make_memory_scene(ctx, &(vkrt_mesh_desc){ .positions = tri_positions, .vertex_count = 0 }, &s) == VKRT_ERROR_EMPTY_SCENE);
     CHECK(s == NULL);

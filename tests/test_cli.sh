@@ -43,7 +43,7 @@ png_size() { python3 -c 'import struct,sys; d=open(sys.argv[1],"rb").read(24); a
 expect "render the built-in scene" 0 "$vkrt" render -o "$tmp/builtin.png" --size 96x64
 if [ -f "$tmp/builtin.png" ] && [ "$(png_size "$tmp/builtin.png")" = "96x64" ]; then ok "built-in PNG is 96x64"; else bad "built-in PNG is 96x64"; fi
 
-for mode in normal depth heatmap id; do
+for mode in normal depth heatmap id albedo uv; do
   expect "render bunny --mode $mode" 0 "$vkrt" render "$models/meshes/bunny.obj" --mode "$mode" -o "$tmp/bunny_$mode.png" --size 48x48
 done
 expect "render heatmap of leaves with the midpoint BVH" 0 "$vkrt" render "$models/meshes/bunny.obj" --mode heatmap --heat leaves --bvh midpoint -o "$tmp/heat.png" --size 32x32

@@ -166,7 +166,7 @@ static float *render_r(const scene *s, render_opts o, vkrt_result *out_result)
     CHECK_MSG(r == VKRT_OK, "camera_setup: %s", c.last_error);
     float *img = calloc((size_t)o.width * o.height * 4, sizeof(float));
     if (!img) abort();
-    cpu_trace_scene cs = { s->b.nodes, s->b.node_count, s->tris, s->b.tri_count };
+    cpu_trace_scene cs = { s->b.nodes, s->b.node_count, s->tris, s->b.tri_count, NULL, NULL };
     trace_counts counts;
     if (r == VKRT_OK) r = cpu_trace_render(&c, &cs, &p, img, &counts);
     *out_result = r;

@@ -196,7 +196,7 @@ static void gpu_every_pipeline_variant_runs(void)
     vkrt_scene *s = make_scene(gpu, VKRT_MODELS_DIR "/meshes/teapot.obj", VKRT_BVH_BUILDER_DEFAULT);
     if (!s) return;
     for (vkrt_traversal t = VKRT_TRAVERSAL_BVH; t <= VKRT_TRAVERSAL_NAIVE; t++) {
-        for (vkrt_mode m = VKRT_MODE_NORMAL; m <= VKRT_MODE_ID; m++) {
+        for (vkrt_mode m = VKRT_MODE_NORMAL; m <= VKRT_MODE_UV; m++) {
             for (vkrt_heat heat = VKRT_HEAT_NODES; heat <= (m == VKRT_MODE_HEATMAP ? VKRT_HEAT_TRIS : VKRT_HEAT_NODES);
                  heat++) {
                 vkrt_render_desc d = { .width = 16, .height = 16, .mode = m, .traversal = t, .heat = heat };
@@ -245,7 +245,7 @@ static bool create_check_buffers(vk_buffer *buffers, const void *const *data, co
 static bool run_check_shader(const char *name, const char *source, vk_buffer *buffers, uint32_t count,
                              const void *push, uint32_t push_size, uint32_t groups)
 {
-    enum { MAX_BINDINGS = 8 };
+    enum { MAX_BINDINGS = 12 };
     vk_context *vk = gpu->vk;
     VkDescriptorSetLayout set_layout = VK_NULL_HANDLE;
     VkPipelineLayout layout = VK_NULL_HANDLE;
@@ -346,6 +346,8 @@ static void gpu_shared_layouts_match_c(void)
     vkrt_gpu_resume states[2];
     vkrt_gpu_stack_entry entries[2];
     vkrt_gpu_counters counters[2];
+    vkrt_gpu_surface surfaces[2];
+    vkrt_gpu_material materials[2];
     fill_distinct(nodes, sizeof nodes, 100.0f);
     fill_distinct(tris, sizeof tris, 200.0f);
     fill_distinct(hits, sizeof hits, 300.0f);
@@ -354,31 +356,35 @@ static void gpu_shared_layouts_match_c(void)
     fill_distinct(states, sizeof states, 500.0f);
     fill_distinct(entries, sizeof entries, 600.0f);
     fill_distinct(counters, sizeof counters, 700.0f);
+    fill_distinct(surfaces, sizeof surfaces, 800.0f);
+    fill_distinct(materials, sizeof materials, 900.0f);
     /* The order in which layout_check.comp writes the structs out. */
-    const void *parts[] = { &nodes[1], &tris[1], &hits[1], &rays[1], &push, &states[1], &entries[1], &counters[1] };
-    const size_t part_sizes[] = { sizeof nodes[1], sizeof tris[1],  sizeof hits[1],    sizeof rays[1],
-                                  sizeof push,     sizeof states[1], sizeof entries[1], sizeof counters[1] };
+    const void *parts[] = { &nodes[1],   &tris[1],     &hits[1],     &rays[1],     &push,
+                            &states[1],  &entries[1],  &counters[1], &surfaces[1], &materials[1] };
+    const size_t part_sizes[] = { sizeof nodes[1],   sizeof tris[1],     sizeof hits[1],     sizeof rays[1],
+                                  sizeof push,       sizeof states[1],   sizeof entries[1],  sizeof counters[1],
+                                  sizeof surfaces[1], sizeof materials[1] };
     uint32_t expected[128];
     size_t words = 0;
-    for (int i = 0; i < 8; i++) {
+    for (int i = 0; i < 10; i++) {
         memcpy(expected + words, parts[i], part_sizes[i]);
         words += part_sizes[i] / 4;
     }
     CHECK(words <= 128);
 
-    /* Bindings 0-2 and 4-7 are inputs; binding 3 receives the words. */
-    vk_buffer buffers[8] = { 0 };
-    const void *data[8] = { nodes, tris, hits, NULL, rays, states, entries, counters };
-    const size_t sizes[8] = { sizeof nodes,  sizeof tris,   sizeof hits,    128 * 4,
-                              sizeof rays,   sizeof states, sizeof entries, sizeof counters };
-    bool ok = create_check_buffers(buffers, data, sizes, 8);
-    ok = ok && run_check_shader("layout_check.comp", vkrt_shader_layout_check_comp, buffers, 8, &push, sizeof push, 1);
+    /* Bindings 0-2 and 4-9 are inputs; binding 3 receives the words. */
+    vk_buffer buffers[10] = { 0 };
+    const void *data[10] = { nodes, tris, hits, NULL, rays, states, entries, counters, surfaces, materials };
+    const size_t sizes[10] = { sizeof nodes,  sizeof tris,     sizeof hits,     128 * 4,         sizeof rays,
+                               sizeof states, sizeof entries,  sizeof counters, sizeof surfaces, sizeof materials };
+    bool ok = create_check_buffers(buffers, data, sizes, 10);
+    ok = ok && run_check_shader("layout_check.comp", vkrt_shader_layout_check_comp, buffers, 10, &push, sizeof push, 1);
     if (ok) {
         const uint32_t *got = buffers[3].mapped;
         for (size_t i = 0; i < words; i++)
             CHECK_MSG(got[i] == expected[i], "word %zu: shader read 0x%08x, C wrote 0x%08x", i, got[i], expected[i]);
     }
-    for (int i = 0; i < 8; i++) vk_buffer_destroy(gpu->vk, &buffers[i]);
+    for (int i = 0; i < 10; i++) vk_buffer_destroy(gpu->vk, &buffers[i]);
 }
 
 /* ray_offset() in GLSL against the C function, bit for bit, on hit points from 1e-30 to 1e30,
@@ -782,6 +788,89 @@ static void gpu_traversal_counters_sum_the_heatmap(void)
     }
 }
 
+/* Two unit squares side by side in z = 0 (x in [-1, 0] and [0, 1], y in [-0.5, 0.5]), each
+ * with its own material and the unit square's texture coordinates, seen face on from
+ * (0, 0, 2): a hit pixel's albedo is its square's base colour and alpha exactly, and its uv the
+ * position within the square (u = x - x0, v = y + 0.5) to float rounding; on both backends,
+ * bit for bit alike. Files and the built-in scene: GPU and CPU alike, and the stats. */
+static void gpu_albedo_and_uv_show_materials_and_texture_coordinates(void)
+{
+    static const float pos[2][12] = { { -1, -0.5f, 0, 0, -0.5f, 0, 0, 0.5f, 0, -1, 0.5f, 0 },
+                                      { 0, -0.5f, 0, 1, -0.5f, 0, 1, 0.5f, 0, 0, 0.5f, 0 } };
+    static const float uv[8] = { 0, 0, 1, 0, 1, 1, 0, 1 };
+    static const uint32_t idx[6] = { 0, 1, 2, 0, 2, 3 };
+    const vkrt_material mats[2] = { { .base_color = { 0.25f, 0.5f, 0.75f, 1.0f }, .roughness = 0.5f },
+                                    { .base_color = { 1.0f, 0.125f, 0.0f, 0.5f }, .metallic = 1.0f } };
+    vkrt_mesh_desc md[2];
+    for (int i = 0; i < 2; i++)
+        md[i] = (vkrt_mesh_desc){ .positions = pos[i], .vertex_count = 4, .indices = idx, .index_count = 6,
+                                  .texcoords = uv, .material = &mats[i] };
+    vkrt_scene_desc sd = { .meshes = md, .mesh_count = 2, .keep_world_coordinates = true };
+    vkrt_scene *sg = NULL, *sc = NULL;
+    CHECK(vkrt_scene_create(gpu, &sd, &sg) == VKRT_OK);
+    CHECK(vkrt_scene_create(cpu, &sd, &sc) == VKRT_OK);
+    const uint32_t w = 48, h = 48;
+    const double half = tan(30.0 * 3.14159265358979323846 / 180.0);
+    vkrt_render_desc d = { .width = w, .height = h, .camera = { .eye = { 0, 0, 2 }, .fov_y_degrees = 60 } };
+    for (int mode = 0; sg && sc && mode < 2; mode++) {
+        d.mode = mode ? VKRT_MODE_UV : VKRT_MODE_ALBEDO;
+        float *g = render(gpu, sg, &d), *c = render(cpu, sc, &d);
+        CHECK_MSG(g && c && memcmp(g, c, (size_t)w * h * 4 * sizeof *g) == 0, "mode %d: GPU and CPU images differ", (int)d.mode);
+        size_t hits = 0, wrong = 0;
+        for (uint32_t y = 0; g && y < h; y++)
+            for (uint32_t x = 0; x < w; x++) {
+                const float *p = g + ((size_t)y * w + x) * 4;
+                double sx = 2.0 * (x + 0.5) / w - 1.0, sy = 1.0 - 2.0 * (y + 0.5) / h;
+                double hx = 2.0 * sx * half, hy = 2.0 * sy * half; /* the hit in z = 0 */
+                bool inside = fabs(hx) < 1.0 && fabs(hy) < 0.5;
+                bool on_edge = fabs(fabs(hx) - 1.0) < 0.05 || fabs(fabs(hy) - 0.5) < 0.05 || fabs(hx) < 0.05;
+                if (on_edge) continue; /* pixel centres close to an edge: not decided here */
+                if (!inside) {
+                    wrong += p[0] != 0.0f || p[1] != 0.0f || p[2] != 0.0f || p[3] != 0.0f;
+                    continue;
+                }
+                hits++;
+                int square = hx > 0.0;
+                if (d.mode == VKRT_MODE_ALBEDO) {
+                    wrong += memcmp(p, mats[square].base_color, 4 * sizeof(float)) != 0;
+                } else {
+                    double u = hx - (square ? 0.0 : -1.0), v = hy + 0.5;
+                    wrong += fabs(p[0] - u) > 1e-5 || fabs(p[1] - v) > 1e-5 || p[2] != 0.0f || p[3] != 1.0f;
+                }
+            }
+        CHECK_MSG(hits > (size_t)w * h / 4 && wrong == 0, "mode %d: %zu of %zu decided pixels wrong", (int)d.mode, wrong,
+                  hits);
+        free(g);
+        free(c);
+    }
+    vkrt_scene_destroy(sg);
+    vkrt_scene_destroy(sc);
+
+    const char *files[3] = { VKRT_MODELS_DIR "/gltf/draco/three_meshes_two_materials_one_no_material/"
+                                             "three_meshes_two_materials_one_no_material.gltf",
+                             VKRT_MODELS_DIR "/gltf/draco/Box/Box.gltf", NULL };
+    for (int f = 0; f < 3; f++) {
+        sg = make_scene(gpu, files[f], VKRT_BVH_BUILDER_DEFAULT);
+        sc = make_scene(cpu, files[f], VKRT_BVH_BUILDER_DEFAULT);
+        vkrt_scene_stats st;
+        CHECK(sg && vkrt_scene_stats_get(sg, &st) == VKRT_OK);
+        if (f == 2) CHECK_MSG(st.materials == 4 && st.has_texcoords, "built-in scene: %u materials", st.materials);
+        d = (vkrt_render_desc){ .width = 40, .height = 40 };
+        for (int mode = 0; sg && sc && mode < 2; mode++) {
+            d.mode = mode ? VKRT_MODE_UV : VKRT_MODE_ALBEDO;
+            float *g = render(gpu, sg, &d), *c = render(cpu, sc, &d);
+            size_t same = 0;
+            for (size_t i = 0; g && c && i < 40 * 40; i++) same += memcmp(g + 4 * i, c + 4 * i, 4 * sizeof *g) == 0;
+            CHECK_MSG(same >= 40 * 40 - 2, "%s mode %d: %zu of 1600 pixels equal", files[f] ? files[f] : "built-in",
+                      (int)d.mode, same);
+            free(g);
+            free(c);
+        }
+        vkrt_scene_destroy(sg);
+        vkrt_scene_destroy(sc);
+    }
+}
+
 /* Double precision is the CPU reference's alone: the GPU refuses it with a message saying so. */
 static void gpu_refuses_double_precision(void)
 {
@@ -842,6 +931,7 @@ int main(void)
     RUN(gpu_traversals_beyond_the_loop_limit_match_cpu);
     RUN(gpu_image_beyond_the_loop_limit_matches_cpu);
     RUN(gpu_traversal_counters_sum_the_heatmap);
+    RUN(gpu_albedo_and_uv_show_materials_and_texture_coordinates);
 
     CHECK_EQ_U64(vkrt_context_validation_messages(gpu), 0);
     vkrt_context_destroy(gpu);

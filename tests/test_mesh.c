@@ -235,6 +235,62 @@ static void obj_file_normals_are_used_when_every_corner_has_one(void)
     mesh_destroy(&g_core, &m);
 }
 
+/* vt records reach the corners of faces that give one per corner; others get (0, 0), and a
+ * texture index that names no vt is dropped like a missing normal. */
+static void obj_texture_coordinates_follow_the_faces(void)
+{
+    mesh m;
+    CHECK_MSG(load(VKRT_TEST_DATA_DIR "/textured.obj", &m) == VKRT_OK, "%s", g_core.last_error);
+    CHECK_EQ_U64(m.tri_count, 4);
+    CHECK(m.has_texcoords);
+    static const float expected[4][6] = { { 0, 0, 1, 0, 1, 1 }, { 0, 0, 1, 1, 0, 1 }, { 0 }, { 0 } };
+    for (uint32_t t = 0; t < m.tri_count && t < 4; t++)
+        for (int k = 0; k < 6; k++)
+            CHECK_MSG(m.texcoords[t * 6 + k] == expected[t][k], "triangle %u texcoord %d is %g, expected %g", t, k,
+                      (double)m.texcoords[t * 6 + k], (double)expected[t][k]);
+    /* No materials in an OBJ yet: every triangle has the default. */
+    CHECK_EQ_U64(m.material_count, 1);
+    vkrt_material def = vkrt_material_default();
+    CHECK(m.material_count && memcmp(&m.materials[0], &def, sizeof def) == 0);
+    for (uint32_t t = 0; t < m.tri_count; t++) CHECK_EQ_U64(m.material_ids[t], 0);
+    mesh_destroy(&g_core, &m);
+}
+
+/* glTF materials: pbrMetallicRoughness factors with the specification's defaults where absent,
+ * one table entry per material used, the default material for a primitive without one, and
+ * TEXCOORD_0 per corner. */
+static void gltf_materials_and_texture_coordinates_load(void)
+{
+    mesh m;
+    CHECK_MSG(load(MODEL("gltf/draco/Box/Box.gltf"), &m) == VKRT_OK, "%s", g_core.last_error);
+    CHECK_EQ_U64(m.material_count, 1);
+    CHECK(!m.has_texcoords);
+    if (m.material_count == 1) {
+        const vkrt_material *red = &m.materials[0];
+        CHECK(red->base_color[0] == 0.8f && red->base_color[1] == 0.0f && red->base_color[2] == 0.0f &&
+              red->base_color[3] == 1.0f);
+        CHECK(red->metallic == 0.0f && red->roughness == 1.0f); /* roughness absent: 1 */
+    }
+    mesh_destroy(&g_core, &m);
+
+    CHECK_MSG(load(MODEL("gltf/draco/three_meshes_two_materials_one_no_material/"
+                         "three_meshes_two_materials_one_no_material.gltf"), &m) == VKRT_OK, "%s", g_core.last_error);
+    CHECK(m.has_texcoords);
+    CHECK_EQ_U64(m.material_count, 3);
+    vkrt_material def = vkrt_material_default();
+    size_t with_default = 0, textured = 0;
+    for (uint32_t t = 0; t < m.tri_count; t++) {
+        const vkrt_material *x = &m.materials[m.material_ids[t]];
+        if (memcmp(x, &def, sizeof def) == 0) with_default++;
+        else CHECK(x->base_color[0] == 1.0f && x->metallic == 1.0f && x->roughness == 1.0f);
+        for (int k = 0; k < 6; k++) textured += m.texcoords[t * 6 + k] != 0.0f;
+    }
+    CHECK_MSG(with_default > 0 && with_default < m.tri_count, "%zu of %u triangles have the default material",
+              with_default, m.tri_count);
+    CHECK_MSG(textured > m.tri_count, "only %zu texture coordinates are not zero", textured);
+    mesh_destroy(&g_core, &m);
+}
+
 static void obj_missing_material_files_do_not_matter(void)
 {
     expect_triangles(MODEL("obj/tinyobjloader/missing_material_file.obj"), 36);
@@ -852,6 +908,8 @@ int main(void)
     RUN(gltf_node_cycles_are_parse_errors_not_hangs);
     RUN(unknown_extensions_are_unsupported_and_case_is_ignored);
     RUN(builtin_scene_is_large_finite_unit_normalled_and_outward);
+    RUN(obj_texture_coordinates_follow_the_faces);
+    RUN(gltf_materials_and_texture_coordinates_load);
     RUN(every_allocation_failure_is_out_of_memory_and_leaks_nothing);
     remove_temp_dir();
     return check_exit();

@@ -41,6 +41,12 @@ void on_normal(void *user, tinyobj::real_t x, tinyobj::real_t y, tinyobj::real_t
     if (cb->normal) cb->normal(cb->user, static_cast<float>(x), static_cast<float>(y), static_cast<float>(z));
 }
 
+void on_texcoord(void *user, tinyobj::real_t u, tinyobj::real_t v, tinyobj::real_t)
+{
+    const tinyobj_shim_callbacks *cb = static_cast<context *>(user)->callbacks;
+    if (cb->texcoord) cb->texcoord(cb->user, static_cast<float>(u), static_cast<float>(v));
+}
+
 void on_index(void *user, tinyobj::index_t *indices, int count)
 {
     context *ctx = static_cast<context *>(user);
@@ -91,6 +97,7 @@ extern "C" tinyobj_shim_status tinyobj_shim_parse(const char *text, size_t size,
         tinyobj::callback_t cb;
         cb.vertex_cb = on_vertex;
         cb.normal_cb = on_normal;
+        cb.texcoord_cb = on_texcoord;
         cb.index_cb = on_index;
         cb.group_cb = on_group;
         cb.object_cb = on_object;

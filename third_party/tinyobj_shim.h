@@ -20,6 +20,7 @@ typedef struct tinyobj_shim_callbacks {
     void *user;
     void (*vertex)(void *user, float x, float y, float z);          /* `v`  */
     void (*normal)(void *user, float x, float y, float z);          /* `vn` */
+    void (*texcoord)(void *user, float u, float v);                 /* `vt` */
     void (*face)(void *user, const tinyobj_shim_corner *corners, size_t count); /* `f`, count >= 1 */
     void (*group)(void *user);                                      /* `o` or `g` */
 } tinyobj_shim_callbacks;
