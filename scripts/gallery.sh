@@ -22,3 +22,5 @@ r "$models/dragon_200k.obj" -o "$out/dragon_heat_nodes_sah.png" --mode heatmap -
 r "$models/armadillo_52k.obj" -o "$out/armadillo_depth.png" --mode depth
 r "$root/../shared/models/gltf/draco/three_meshes_two_materials_one_no_material/three_meshes_two_materials_one_no_material.gltf" \
   -o "$out/three_meshes_uv.png" --mode uv --eye 1.2,0.4,0.6
+r "$root/../shared/models/gltf/draco/three_meshes_two_materials_one_no_material/three_meshes_two_materials_one_no_material.gltf" \
+  -o "$out/three_meshes_albedo.png" --mode albedo --eye 1.2,0.4,0.6

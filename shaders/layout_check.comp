@@ -16,6 +16,7 @@ layout(std430, set = 0, binding = 6) readonly buffer ResumeStack { vkrt_gpu_stac
 layout(std430, set = 0, binding = 7) readonly buffer Counters { vkrt_gpu_counters counters[]; };
 layout(std430, set = 0, binding = 8) readonly buffer Surfaces { vkrt_gpu_surface surfaces[]; };
 layout(std430, set = 0, binding = 9) readonly buffer Materials { vkrt_gpu_material materials[]; };
+layout(std430, set = 0, binding = 10) readonly buffer Textures { vkrt_gpu_texture textures[]; };
 layout(push_constant) uniform PushBlock { vkrt_gpu_push p; };
 
 uint k = 0;
@@ -48,6 +49,8 @@ void main()
     vkrt_gpu_surface f = surfaces[1];
     put(f.u0); put(f.v0); put(f.u1); put(f.v1); put(f.u2); put(f.v2); put(f.material); put(f.pad0);
     vkrt_gpu_material m = materials[1];
-    put(m.base_color); put(m.alpha); put(m.emissive); put(m.metallic); put(m.roughness); put(m.pad0); put(m.pad1);
-    put(m.pad2);
+    put(m.base_color); put(m.alpha); put(m.emissive); put(m.metallic); put(m.roughness); put(m.base_color_texture);
+    put(m.pad1); put(m.pad2);
+    vkrt_gpu_texture x = textures[1];
+    put(x.first); put(x.width); put(x.height); put(x.wrap);
 }

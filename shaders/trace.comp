@@ -59,6 +59,12 @@ layout(set = 0, binding = VKRT_BINDING_SURFACES, std430) readonly buffer Surface
 layout(set = 0, binding = VKRT_BINDING_MATERIALS, std430) readonly buffer Materials {
     vkrt_gpu_material materials[];
 };
+layout(set = 0, binding = VKRT_BINDING_TEXTURES, std430) readonly buffer Textures {
+    vkrt_gpu_texture textures[];
+};
+layout(set = 0, binding = VKRT_BINDING_TEXELS, std430) readonly buffer Texels {
+    uvec2 texels[]; /* linear RGBA as halves: (R | G << 16, B | A << 16) */
+};
 layout(push_constant, std430) uniform Push {
     vkrt_gpu_push p;
 };
@@ -219,13 +225,70 @@ bool already_finished(uint slot)
 }
 
 /* Texture coordinates interpolated with the hit's barycentrics (u: corner 1, v: corner 2).
- * Mirrors the VKRT_MODE_UV case of shade() in src/cpu_trace.c. */
-vec4 shade_uv(vkrt_gpu_surface f, float u, float v)
+ * Mirrors surface_uv() in src/cpu_trace.c. */
+vec2 surface_uv(vkrt_gpu_surface f, float u, float v)
 {
     precise float w = 1.0 - u - v;
     precise float s = (f.u0 * w + f.u1 * u) + f.u2 * v;
     precise float t = (f.v0 * w + f.v1 * u) + f.v2 * v;
-    return vec4(s, t, 0.0, 1.0);
+    return vec2(s, t);
+}
+
+/* The sampling of src/texture.c, function for function: a coordinate brought into one period
+ * of its wrap mode, texel indices wrapped (without GLSL's undefined % of negatives), four
+ * texels fetched and blended bilinearly. */
+float wrap_coordinate(float u, uint mode)
+{
+    if (!(abs(u) < 1e30)) return 0.0;
+    if (mode == VKRT_GPU_WRAP_CLAMP) return u < -1.0 ? -1.0 : (u > 2.0 ? 2.0 : u);
+    precise float r = mode == VKRT_GPU_WRAP_MIRROR ? u - 2.0 * floor(u * 0.5) : u - floor(u);
+    return r;
+}
+
+int wrap_index(int i, int n, uint mode)
+{
+    if (mode == VKRT_GPU_WRAP_CLAMP) return i < 0 ? 0 : (i >= n ? n - 1 : i);
+    if (mode == VKRT_GPU_WRAP_MIRROR) {
+        int k = i < 0 ? i + 2 * n : (i >= 2 * n ? i - 2 * n : i);
+        return k < n ? k : 2 * n - 1 - k;
+    }
+    return i < 0 ? i + n : (i >= n ? i - n : i);
+}
+
+vec4 fetch_texel(vkrt_gpu_texture t, int x, int y)
+{
+    uvec2 p = texels[t.first + uint(y) * t.width + uint(x)];
+    return vec4(unpackHalf2x16(p.x), unpackHalf2x16(p.y));
+}
+
+vec4 sample_texture(vkrt_gpu_texture t, vec2 uv)
+{
+    int w = int(t.width), h = int(t.height);
+    uint wrap_u = t.wrap & 0xFFu, wrap_v = t.wrap >> 8;
+    precise float x = wrap_coordinate(uv.x, wrap_u) * float(w) - 0.5;
+    precise float y = wrap_coordinate(uv.y, wrap_v) * float(h) - 0.5;
+    float x0 = floor(x), y0 = floor(y);
+    precise float fx = x - x0, fy = y - y0;
+    int ix = int(x0), iy = int(y0);
+    int xa = wrap_index(ix, w, wrap_u), xb = wrap_index(ix + 1, w, wrap_u);
+    int ya = wrap_index(iy, h, wrap_v), yb = wrap_index(iy + 1, h, wrap_v);
+    vec4 c00 = fetch_texel(t, xa, ya), c10 = fetch_texel(t, xb, ya);
+    vec4 c01 = fetch_texel(t, xa, yb), c11 = fetch_texel(t, xb, yb);
+    precise vec4 top = c00 * (1.0 - fx) + c10 * fx;
+    precise vec4 bottom = c01 * (1.0 - fx) + c11 * fx;
+    precise vec4 result = top * (1.0 - fy) + bottom * fy;
+    return result;
+}
+
+/* The material's base colour and alpha, times its texture where it has one. Mirrors the
+ * VKRT_MODE_ALBEDO case of shade() in src/cpu_trace.c. */
+vec4 shade_albedo(vkrt_gpu_surface f, float u, float v)
+{
+    vkrt_gpu_material m = materials[f.material];
+    precise vec4 colour = vec4(m.base_color, m.alpha);
+    if (m.base_color_texture != VKRT_NO_TEXTURE)
+        colour = colour * sample_texture(textures[m.base_color_texture], surface_uv(f, u, v));
+    return colour;
 }
 
 vec4 shade(hit best, heat_counts heat)
@@ -239,12 +302,8 @@ vec4 shade(hit best, heat_counts heat)
         return is_hit ? vec4(best.t, 0.0, 0.0, 1.0) : vec4(VKRT_MISS, 0.0, 0.0, 0.0);
     if (MODE == VKRT_GPU_MODE_ID)
         return is_hit ? vec4(float(best.prim), best.u, best.v, 1.0) : vec4(VKRT_MISS, 0.0, 0.0, 0.0);
-    if (MODE == VKRT_GPU_MODE_ALBEDO) {
-        if (!is_hit) return vec4(0.0);
-        vkrt_gpu_material m = materials[surfaces[best.prim].material];
-        return vec4(m.base_color, m.alpha);
-    }
-    if (MODE == VKRT_GPU_MODE_UV) return is_hit ? shade_uv(surfaces[best.prim], best.u, best.v) : vec4(0.0);
+    if (MODE == VKRT_GPU_MODE_ALBEDO) return is_hit ? shade_albedo(surfaces[best.prim], best.u, best.v) : vec4(0.0);
+    if (MODE == VKRT_GPU_MODE_UV) return is_hit ? vec4(surface_uv(surfaces[best.prim], best.u, best.v), 0.0, 1.0) : vec4(0.0);
     if (!is_hit) return vec4(0.0);
     return shade_normal(tris[best.tri], best.u, best.v);
 }

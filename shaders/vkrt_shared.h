@@ -40,6 +40,8 @@ typedef struct vkrt_float3 { float x, y, z; } vkrt_float3;
 #define VKRT_BINDING_COUNTERS 8        /* vkrt_gpu_counters per pixel of a tile (VKRT_SPEC_COUNTERS) */
 #define VKRT_BINDING_SURFACES 9        /* vkrt_gpu_surface per triangle, by prim_id (albedo, uv) */
 #define VKRT_BINDING_MATERIALS 10      /* vkrt_gpu_material table (albedo) */
+#define VKRT_BINDING_TEXTURES 11       /* vkrt_gpu_texture table (albedo) */
+#define VKRT_BINDING_TEXELS 12         /* every texture's texels: linear RGBA as 4 halves (uvec2) */
 
 /* Specialization constant ids: features a render does not use are compiled out instead of
  * branched over (lavapipe pays nearly full price for an `if` that is false everywhere). */
@@ -204,9 +206,23 @@ VKRT_STRUCT(vkrt_gpu_material) {
     VKRT_FLOAT3 emissive;   /* offset 16 */
     float metallic;         /* offset 28 */
     float roughness;        /* offset 32 */
-    VKRT_UINT pad0;         /* offset 36 */
+    VKRT_UINT base_color_texture; /* offset 36; index into the texture table, VKRT_NO_TEXTURE: none */
     VKRT_UINT pad1;         /* offset 40 */
     VKRT_UINT pad2;         /* offset 44 */
+};
+
+#define VKRT_NO_TEXTURE 0xFFFFFFFFu
+/* Texture wrap modes (vkrt_wrap). */
+#define VKRT_GPU_WRAP_REPEAT 0
+#define VKRT_GPU_WRAP_CLAMP 1
+#define VKRT_GPU_WRAP_MIRROR 2
+
+/* A texture, 16 bytes: its texels start at `first` of the texel buffer, rows top to bottom. */
+VKRT_STRUCT(vkrt_gpu_texture) {
+    VKRT_UINT first;       /* offset  0; in texels */
+    VKRT_UINT width;       /* offset  4 */
+    VKRT_UINT height;      /* offset  8 */
+    VKRT_UINT wrap;        /* offset 12; wrap_u | wrap_v << 8 (VKRT_GPU_WRAP_*) */
 };
 
 /* One saved traversal stack entry, 8 bytes: a pushed node and the distance its box starts. */
@@ -273,6 +289,7 @@ _Static_assert(VKRT_NAIVE_CHUNK_TRIS <= VKRT_LAVAPIPE_BUDGET, "a naive chunk's l
 _Static_assert(sizeof(vkrt_gpu_counters) == 16, "vkrt_gpu_counters must match std430");
 _Static_assert(sizeof(vkrt_gpu_surface) == 32, "vkrt_gpu_surface must match std430");
 _Static_assert(sizeof(vkrt_gpu_material) == 48, "vkrt_gpu_material must match std430");
+_Static_assert(sizeof(vkrt_gpu_texture) == 16, "vkrt_gpu_texture must match std430");
 _Static_assert(offsetof(vkrt_gpu_material, emissive) == 16, "vkrt_gpu_material.emissive must match std430");
 _Static_assert(sizeof(vkrt_gpu_push) == 96, "vkrt_gpu_push must match the push-constant range");
 _Static_assert(offsetof(vkrt_gpu_push, right) == 16, "vkrt_gpu_push.right must match std430");

@@ -118,6 +118,8 @@ void vkrt_scene_destroy(vkrt_scene *scene)
     core_free(c, scene->tris);
     core_free(c, scene->surfaces);
     core_free(c, scene->materials);
+    core_free(c, scene->textures);
+    core_free(c, scene->texels);
     core_free(c, scene);
 }
 
@@ -141,8 +143,10 @@ static void fill_stats(vkrt_scene *s, const mesh *m, double load_ms)
     memcpy(st->bounds_max, m->bounds_max, sizeof st->bounds_max);
     st->materials = m->material_count;
     st->has_texcoords = m->has_texcoords;
+    st->textures = m->texture_count;
     st->surface_bytes = (uint64_t)m->tri_count * sizeof(vkrt_gpu_surface) +
-                        (uint64_t)m->material_count * sizeof(vkrt_gpu_material);
+                        (uint64_t)m->material_count * sizeof(vkrt_gpu_material) +
+                        (uint64_t)m->texture_count * sizeof(vkrt_gpu_texture) + (uint64_t)scene_texel_count(m) * 8u;
 }
 
 /* The caller's arrays go through the same validation, normal generation and transform as a
@@ -166,8 +170,13 @@ static vkrt_result meshes_from_memory(core *c, const vkrt_scene_desc *d, mesh *m
         };
         vkrt_result r = VKRT_OK;
         if (md->material) {
-            uint32_t index;
-            r = mesh_add_material(c, m, md->material, VKRT_ERROR_INVALID_ARGUMENT, "in-memory scene", what, &index);
+            uint32_t texture = VKRT_NO_TEXTURE, index = 0;
+            if (md->material->base_color_texture)
+                r = mesh_add_texture(c, m, md->material->base_color_texture, VKRT_ERROR_INVALID_ARGUMENT,
+                                     "in-memory scene", what, &texture);
+            if (r == VKRT_OK)
+                r = mesh_add_material(c, m, md->material, texture, VKRT_ERROR_INVALID_ARGUMENT, "in-memory scene",
+                                      what, &index);
             p.material = MESH_MATERIAL(index);
         }
         if (r == VKRT_OK) r = mesh_append_indexed(c, m, &p, "in-memory scene", what);
@@ -225,14 +234,21 @@ vkrt_result vkrt_scene_create(vkrt_context *ctx, const vkrt_scene_desc *desc, vk
         goto fail;
     }
     scene_pack_triangles(&m, &s->bvh, s->tris);
+    s->texel_count = scene_texel_count(&m);
     s->surfaces = core_alloc_array(c, m.tri_count, sizeof *s->surfaces);
     s->materials = core_alloc_array(c, m.material_count, sizeof *s->materials);
-    if (!s->surfaces || !s->materials) {
+    /* At least one entry each: the device buffers always hold something. */
+    s->textures = core_alloc_array(c, m.texture_count ? m.texture_count : 1, sizeof *s->textures);
+    s->texels = core_alloc_array(c, s->texel_count ? s->texel_count : 1, 2 * sizeof *s->texels);
+    if (!s->surfaces || !s->materials || !s->textures || !s->texels) {
         r = core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "out of memory packing the surfaces of %u triangles", m.tri_count);
         goto fail;
     }
     s->material_count = m.material_count;
-    scene_pack_surfaces(&m, s->surfaces, s->materials);
+    s->texture_count = m.texture_count;
+    if (!m.texture_count) memset(s->textures, 0, sizeof *s->textures);
+    if (!s->texel_count) memset(s->texels, 0, 2 * sizeof *s->texels);
+    scene_pack_surfaces(&m, s->surfaces, s->materials, s->textures, s->texels);
     fill_stats(s, &m, load_ms);
     mesh_destroy(c, &m);
     if (ctx->vk) {
@@ -321,8 +337,10 @@ vkrt_result vkrt_render(vkrt_context *ctx, vkrt_scene *scene, const vkrt_render_
     trace_counts counts = { 0 };
     const bool reads_surfaces = mode == VKRT_MODE_ALBEDO || mode == VKRT_MODE_UV;
     if (ctx->vk && reads_surfaces &&
-        (r = gpu_scene_upload_surfaces(ctx->vk, &scene->gpu, scene->surfaces, scene->materials,
-                                       scene->material_count)) != VKRT_OK)
+        (r = gpu_scene_upload_surfaces(ctx->vk, &scene->gpu, &(gpu_surface_data){
+                                           scene->surfaces, scene->materials, scene->material_count, scene->textures,
+                                           scene->texture_count ? scene->texture_count : 1, scene->texels,
+                                           scene->texel_count ? scene->texel_count : 1 })) != VKRT_OK)
         return r;
     if (ctx->vk) {
         gpu_trace_params p = {
@@ -334,7 +352,8 @@ vkrt_result vkrt_render(vkrt_context *ctx, vkrt_scene *scene, const vkrt_render_
         cpu_trace_scene s = {
             .nodes = scene->bvh.nodes, .node_count = scene->bvh.node_count,
             .tris = scene->tris, .tri_count = scene->bvh.tri_count,
-            .surfaces = scene->surfaces, .materials = scene->materials,
+            .surfaces = scene->surfaces, .materials = scene->materials, .textures = scene->textures,
+            .texels = scene->texels,
         };
         cpu_trace_params p = {
             .camera = camera, .mode = mode, .traversal = traversal, .heat = heat, .intersector = d.intersector,

@@ -21,6 +21,10 @@ struct vkrt_scene {
     vkrt_gpu_surface *surfaces; /* per triangle by prim_id: texture coordinates, material */
     vkrt_gpu_material *materials;
     uint32_t material_count;
+    vkrt_gpu_texture *textures;
+    uint32_t texture_count;
+    uint32_t *texels;          /* 2 words per texel, every texture's in turn */
+    size_t texel_count;
     gpu_scene gpu;             /* device copies (GPU backend) */
     vkrt_scene_stats stats;
 };

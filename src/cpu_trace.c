@@ -11,6 +11,7 @@
 #include <stdbool.h>
 
 #include "scene_pack.h"
+#include "texture.h"
 
 /* Square tiles of this side are the unit of work a thread claims: small enough that threads
  * finish together and that a cancel is seen soon, large enough that the shared counter is
@@ -74,6 +75,15 @@ static float refine_hit_distance(vec3_d origin, vec3_d dir, double tmin, double 
     return refined > tmin && refined < tmax ? (float)refined : t;
 }
 
+/* Texture coordinates interpolated with the hit's barycentrics (u: corner 1, v: corner 2).
+ * Mirrors surface_uv() in shaders/trace.comp. */
+static void surface_uv(const vkrt_gpu_surface *f, float u, float v, float out[2])
+{
+    float w = 1.0f - u - v;
+    out[0] = (f->u0 * w + f->u1 * u) + f->u2 * v;
+    out[1] = (f->v0 * w + f->v1 * u) + f->v2 * v;
+}
+
 static void shade(const cpu_trace_scene *s, const cpu_trace_params *p, const hit *best, const heat_counts *heat,
                   float out[4])
 {
@@ -95,18 +105,22 @@ static void shade(const cpu_trace_scene *s, const cpu_trace_params *p, const hit
     case VKRT_MODE_ALBEDO: {
         out[0] = out[1] = out[2] = out[3] = 0.0f;
         if (!is_hit) return;
-        const vkrt_gpu_material *m = &s->materials[s->surfaces[best->prim].material];
+        const vkrt_gpu_surface *f = &s->surfaces[best->prim];
+        const vkrt_gpu_material *m = &s->materials[f->material];
         out[0] = m->base_color.x, out[1] = m->base_color.y, out[2] = m->base_color.z, out[3] = m->alpha;
+        if (m->base_color_texture != VKRT_NO_TEXTURE) {
+            /* Mirrors shade_albedo() in shaders/trace.comp. */
+            float uv[2], texel[4];
+            surface_uv(f, best->u, best->v, uv);
+            texture_sample(&s->textures[m->base_color_texture], s->texels, uv[0], uv[1], texel);
+            for (int k = 0; k < 4; k++) out[k] = out[k] * texel[k];
+        }
         return;
     }
     case VKRT_MODE_UV: {
         out[0] = out[1] = out[2] = out[3] = 0.0f;
         if (!is_hit) return;
-        /* Mirrors shade_uv() in shaders/trace.comp. */
-        const vkrt_gpu_surface *f = &s->surfaces[best->prim];
-        float w = 1.0f - best->u - best->v;
-        out[0] = (f->u0 * w + f->u1 * best->u) + f->u2 * best->v;
-        out[1] = (f->v0 * w + f->v1 * best->u) + f->v2 * best->v;
+        surface_uv(&s->surfaces[best->prim], best->u, best->v, out);
         out[3] = 1.0f;
         return;
     }

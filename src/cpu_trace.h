@@ -17,6 +17,8 @@ typedef struct cpu_trace_scene {
     uint32_t tri_count;
     const vkrt_gpu_surface *surfaces;   /* by prim_id (albedo and uv modes) */
     const vkrt_gpu_material *materials;
+    const vkrt_gpu_texture *textures;
+    const uint32_t *texels;
 } cpu_trace_scene;
 
 typedef struct cpu_trace_params {

@@ -47,6 +47,12 @@ vkrt_result gpu_scene_upload(vk_context *vk, const vkrt_gpu_node *nodes, uint32_
     if ((r = vk_buffer_create(vk, sizeof(vkrt_gpu_material), usage, VK_MEMORY_DEVICE, "vkrt materials (placeholder)",
                               &out->materials)) != VKRT_OK)
         goto fail;
+    if ((r = vk_buffer_create(vk, sizeof(vkrt_gpu_texture), usage, VK_MEMORY_DEVICE, "vkrt textures (placeholder)",
+                              &out->textures)) != VKRT_OK)
+        goto fail;
+    if ((r = vk_buffer_create(vk, 2 * sizeof(uint32_t), usage, VK_MEMORY_DEVICE, "vkrt texels (placeholder)",
+                              &out->texels)) != VKRT_OK)
+        goto fail;
     out->node_count = node_count;
     out->tri_count = tri_count;
     return VKRT_OK;
@@ -61,34 +67,40 @@ void gpu_scene_destroy(vk_context *vk, gpu_scene *s)
     vk_buffer_destroy(vk, &s->tris);
     vk_buffer_destroy(vk, &s->surfaces);
     vk_buffer_destroy(vk, &s->materials);
+    vk_buffer_destroy(vk, &s->textures);
+    vk_buffer_destroy(vk, &s->texels);
 }
 
-vkrt_result gpu_scene_upload_surfaces(vk_context *vk, gpu_scene *s, const vkrt_gpu_surface *surfaces,
-                                      const vkrt_gpu_material *materials, uint32_t material_count)
+vkrt_result gpu_scene_upload_surfaces(vk_context *vk, gpu_scene *s, const gpu_surface_data *d)
 {
     if (s->surfaces_uploaded) return VKRT_OK;
-    VkDeviceSize surface_bytes = (VkDeviceSize)s->tri_count * sizeof *surfaces;
-    VkDeviceSize material_bytes = (VkDeviceSize)material_count * sizeof *materials;
-    vkrt_result r;
-    if ((r = check_range(vk, surface_bytes, "surfaces")) != VKRT_OK) return r;
-    if ((r = check_range(vk, material_bytes, "materials")) != VKRT_OK) return r;
+    struct {
+        vk_buffer *target;
+        const void *data;
+        VkDeviceSize bytes;
+        const char *name;
+        vk_buffer fresh;
+    } parts[] = {
+        { &s->surfaces, d->surfaces, (VkDeviceSize)s->tri_count * sizeof *d->surfaces, "surfaces", { 0 } },
+        { &s->materials, d->materials, (VkDeviceSize)d->material_count * sizeof *d->materials, "materials", { 0 } },
+        { &s->textures, d->textures, (VkDeviceSize)d->texture_count * sizeof *d->textures, "textures", { 0 } },
+        { &s->texels, d->texels, (VkDeviceSize)d->texel_count * 2 * sizeof *d->texels, "texels", { 0 } },
+    };
+    enum { PARTS = sizeof parts / sizeof parts[0] };
     VkBufferUsageFlags usage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT;
-    vk_buffer fresh_surfaces = { 0 }, fresh_materials = { 0 };
-    r = vk_buffer_create(vk, surface_bytes, usage, VK_MEMORY_DEVICE, "vkrt surfaces", &fresh_surfaces);
-    if (r == VKRT_OK) r = vk_buffer_create(vk, material_bytes, usage, VK_MEMORY_DEVICE, "vkrt materials", &fresh_materials);
-    if (r == VKRT_OK) r = vk_buffer_upload(vk, &fresh_surfaces, surfaces, surface_bytes);
-    if (r == VKRT_OK) r = vk_buffer_upload(vk, &fresh_materials, materials, material_bytes);
-    if (r != VKRT_OK) {
-        vk_buffer_destroy(vk, &fresh_surfaces);
-        vk_buffer_destroy(vk, &fresh_materials);
-        return r;
+    vkrt_result r = VKRT_OK;
+    for (int i = 0; i < PARTS && r == VKRT_OK; i++) {
+        r = check_range(vk, parts[i].bytes, parts[i].name);
+        if (r == VKRT_OK) r = vk_buffer_create(vk, parts[i].bytes, usage, VK_MEMORY_DEVICE, parts[i].name, &parts[i].fresh);
+        if (r == VKRT_OK) r = vk_buffer_upload(vk, &parts[i].fresh, parts[i].data, parts[i].bytes);
     }
-    vk_buffer_destroy(vk, &s->surfaces);
-    vk_buffer_destroy(vk, &s->materials);
-    s->surfaces = fresh_surfaces;
-    s->materials = fresh_materials;
-    s->surfaces_uploaded = true;
-    return VKRT_OK;
+    for (int i = 0; i < PARTS; i++) {
+        vk_buffer *keep = r == VKRT_OK ? parts[i].target : &parts[i].fresh;
+        vk_buffer_destroy(vk, keep);
+        if (r == VKRT_OK) *parts[i].target = parts[i].fresh;
+    }
+    s->surfaces_uploaded = r == VKRT_OK;
+    return r;
 }
 
 /* Per-call device objects: one tile-sized storage image (1x1 for rays), the readback buffer,
@@ -179,7 +191,7 @@ static vkrt_result create_descriptors(vk_context *vk, const gpu_scene *scene, Vk
                                       render_objects *o)
 {
     VkDescriptorPoolSize sizes[] = {
-        { VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 10 }, /* every binding but the image */
+        { VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 12 }, /* every binding but the image */
         { VK_DESCRIPTOR_TYPE_STORAGE_IMAGE, 1 },
     };
     VkDescriptorPoolCreateInfo pool_info = {
@@ -208,6 +220,7 @@ static vkrt_result create_descriptors(vk_context *vk, const gpu_scene *scene, Vk
         { VKRT_BINDING_RESUME, o->resume.buffer },     { VKRT_BINDING_RESUME_STACK, o->resume_stack.buffer },
         { VKRT_BINDING_UNFINISHED, o->unfinished.buffer },    { VKRT_BINDING_COUNTERS, o->counters.buffer },
         { VKRT_BINDING_SURFACES, scene->surfaces.buffer },    { VKRT_BINDING_MATERIALS, scene->materials.buffer },
+        { VKRT_BINDING_TEXTURES, scene->textures.buffer },    { VKRT_BINDING_TEXELS, scene->texels.buffer },
     };
     enum { BUFFERS = sizeof buffers / sizeof buffers[0] };
     VkDescriptorBufferInfo infos[BUFFERS];

@@ -11,9 +11,11 @@
 typedef struct gpu_scene {
     vk_buffer nodes;
     vk_buffer tris;
-    vk_buffer surfaces;        /* vkrt_gpu_surface per triangle, and */
-    vk_buffer materials;       /* the material table: one-element placeholders until a render
-                                  needs them (gpu_scene_upload_surfaces) */
+    vk_buffer surfaces;        /* vkrt_gpu_surface per triangle, */
+    vk_buffer materials;       /* the material table, */
+    vk_buffer textures;        /* the texture table and */
+    vk_buffer texels;          /* the texels: one-element placeholders until a render needs
+                                  them (gpu_scene_upload_surfaces) */
     bool surfaces_uploaded;
     uint32_t node_count;
     uint32_t tri_count;
@@ -25,11 +27,21 @@ vkrt_result gpu_scene_upload(vk_context *vk, const vkrt_gpu_node *nodes, uint32_
                              const vkrt_gpu_tri *tris, uint32_t tri_count, gpu_scene *out);
 void gpu_scene_destroy(vk_context *vk, gpu_scene *s);
 
-/* Uploads the surfaces (tri_count of them) and materials, replacing the placeholders; a no-op
+/* What gpu_scene_upload_surfaces uploads (counts of at least 1). */
+typedef struct gpu_surface_data {
+    const vkrt_gpu_surface *surfaces; /* tri_count of them */
+    const vkrt_gpu_material *materials;
+    uint32_t material_count;
+    const vkrt_gpu_texture *textures;
+    uint32_t texture_count;
+    const uint32_t *texels;           /* 2 words per texel */
+    size_t texel_count;
+} gpu_surface_data;
+
+/* Uploads the surfaces, materials, textures and texels, replacing the placeholders; a no-op
  * once done. The modes that read them call this first, so scenes rendered only in the others
  * never hold them on the device. */
-vkrt_result gpu_scene_upload_surfaces(vk_context *vk, gpu_scene *s, const vkrt_gpu_surface *surfaces,
-                                      const vkrt_gpu_material *materials, uint32_t material_count);
+vkrt_result gpu_scene_upload_surfaces(vk_context *vk, gpu_scene *s, const gpu_surface_data *data);
 
 typedef struct gpu_trace_params {
     vkrt_gpu_push camera;      /* eye/right/up/forward/width/height filled by camera_setup */

@@ -622,8 +622,9 @@ static int command_info(options *o)
     printf("bytes         %" PRIu64 " (nodes %" PRIu64 ", triangles %" PRIu64 "; %.1f per triangle)\n",
            s.node_bytes + s.triangle_bytes, s.node_bytes, s.triangle_bytes,
            s.triangles ? (double)(s.node_bytes + s.triangle_bytes) / (double)s.triangles : 0.0);
-    printf("surfaces      %" PRIu64 " bytes (albedo and uv modes only): %u material%s, %s\n", s.surface_bytes,
-           s.materials, s.materials == 1 ? "" : "s", s.has_texcoords ? "texture coordinates" : "no texture coordinates");
+    printf("surfaces      %" PRIu64 " bytes (albedo and uv modes only): %u material%s, %u texture%s, %s\n",
+           s.surface_bytes, s.materials, s.materials == 1 ? "" : "s", s.textures, s.textures == 1 ? "" : "s",
+           s.has_texcoords ? "texture coordinates" : "no texture coordinates");
     printf("bounds        (%g, %g, %g) - (%g, %g, %g)\n", s.bounds_min[0], s.bounds_min[1], s.bounds_min[2],
            s.bounds_max[0], s.bounds_max[1], s.bounds_max[2]);
     printf("leaf sizes   ");

@@ -13,6 +13,8 @@
 #include <stdio.h>
 #include <string.h>
 
+#include "texture.h"
+
 /* One per-triangle array moved into a larger allocation (the first tri_count entries kept). */
 typedef struct grown {
     void **array;
@@ -52,8 +54,37 @@ static int reserve(core *c, mesh *m, size_t needed)
     return 0;
 }
 
-vkrt_result mesh_add_material(core *c, mesh *m, const vkrt_material *mat, vkrt_result invalid, const char *source,
-                              const char *what, uint32_t *out_index)
+vkrt_result mesh_add_texture(core *c, mesh *m, const vkrt_texture_desc *desc, vkrt_result invalid, const char *source,
+                             const char *what, uint32_t *out_index)
+{
+    if (!desc->rgba8) return core_fail(c, invalid, "%s: %s: texture without pixels", source, what);
+    if (desc->width == 0 || desc->height == 0 || desc->width > TEXTURE_MAX_SIDE || desc->height > TEXTURE_MAX_SIDE)
+        return core_fail(c, invalid, "%s: %s: texture of %ux%u texels (each side 1 to %u)", source, what, desc->width,
+                         desc->height, TEXTURE_MAX_SIDE);
+    if ((unsigned)desc->wrap_u > VKRT_WRAP_MIRROR || (unsigned)desc->wrap_v > VKRT_WRAP_MIRROR)
+        return core_fail(c, invalid, "%s: %s: texture wrap mode has no valid value", source, what);
+    if (m->texture_count == m->texture_capacity) {
+        uint32_t cap = m->texture_capacity ? m->texture_capacity * 2 : 4;
+        mesh_texture *fresh = cap > m->texture_capacity ? core_alloc_array(c, cap, sizeof *fresh) : NULL;
+        if (!fresh) return core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "%s: out of memory for %u textures", source, cap);
+        if (m->texture_count) memcpy(fresh, m->textures, m->texture_count * sizeof *fresh);
+        core_free(c, m->textures);
+        m->textures = fresh;
+        m->texture_capacity = cap;
+    }
+    uint32_t *texels = core_alloc_array(c, (size_t)desc->width * desc->height, 2 * sizeof(uint32_t));
+    if (!texels)
+        return core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "%s: %s: out of memory for a %ux%u texture", source, what,
+                         desc->width, desc->height);
+    texture_encode_rgba8(desc->rgba8, desc->width, desc->height, texels);
+    m->textures[m->texture_count] = (mesh_texture){ desc->width, desc->height,
+                                                    (uint32_t)desc->wrap_u | (uint32_t)desc->wrap_v << 8, texels };
+    *out_index = m->texture_count++;
+    return VKRT_OK;
+}
+
+vkrt_result mesh_add_material(core *c, mesh *m, const vkrt_material *mat, uint32_t texture, vkrt_result invalid,
+                              const char *source, const char *what, uint32_t *out_index)
 {
     const struct {
         const char *name;
@@ -73,16 +104,29 @@ vkrt_result mesh_add_material(core *c, mesh *m, const vkrt_material *mat, vkrt_r
                 return core_fail(c, invalid, "%s: %s: material %s[%d] is %g, outside [0, %g]", source, what,
                                  fields[f].name, i, (double)v, (double)fields[f].max);
         }
+    if (texture != VKRT_NO_TEXTURE && texture >= m->texture_count)
+        return core_fail(c, invalid, "%s: %s: texture %u of %u does not exist", source, what, texture, m->texture_count);
     if (m->material_count == m->material_capacity) {
         uint32_t cap = m->material_capacity ? m->material_capacity * 2 : 8;
         vkrt_material *fresh = cap > m->material_capacity ? core_alloc_array(c, cap, sizeof *fresh) : NULL;
-        if (!fresh) return core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "%s: out of memory for %u materials", source, cap);
-        if (m->material_count) memcpy(fresh, m->materials, m->material_count * sizeof *fresh);
+        uint32_t *fresh_textures = fresh ? core_alloc_array(c, cap, sizeof *fresh_textures) : NULL;
+        if (!fresh_textures) {
+            core_free(c, fresh);
+            return core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "%s: out of memory for %u materials", source, cap);
+        }
+        if (m->material_count) {
+            memcpy(fresh, m->materials, m->material_count * sizeof *fresh);
+            memcpy(fresh_textures, m->material_textures, m->material_count * sizeof *fresh_textures);
+        }
         core_free(c, m->materials);
+        core_free(c, m->material_textures);
         m->materials = fresh;
+        m->material_textures = fresh_textures;
         m->material_capacity = cap;
     }
     m->materials[m->material_count] = *mat;
+    m->materials[m->material_count].base_color_texture = NULL; /* the caller's, gone after the call */
+    m->material_textures[m->material_count] = texture;
     *out_index = m->material_count++;
     return VKRT_OK;
 }
@@ -268,7 +312,7 @@ vkrt_result mesh_append_indexed(core *c, mesh *m, const mesh_primitive *p, const
     if (p->material == 0) {
         if (!m->has_default_material) {
             const vkrt_material fallback = vkrt_material_default();
-            if ((r = mesh_add_material(c, m, &fallback, VKRT_ERROR_INVALID_ARGUMENT, source, what,
+            if ((r = mesh_add_material(c, m, &fallback, VKRT_NO_TEXTURE, VKRT_ERROR_INVALID_ARGUMENT, source, what,
                                        &m->default_material)) != VKRT_OK)
                 goto done;
             m->has_default_material = true;
@@ -375,6 +419,9 @@ void mesh_destroy(core *c, mesh *m)
     core_free(c, m->texcoords);
     core_free(c, m->material_ids);
     core_free(c, m->materials);
+    core_free(c, m->material_textures);
+    for (uint32_t i = 0; i < m->texture_count; i++) core_free(c, m->textures[i].texels);
+    core_free(c, m->textures);
     memset(m, 0, sizeof *m);
 }
 

@@ -10,12 +10,20 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "../shaders/vkrt_shared.h"
 #include "core.h"
 #include "vkrt.h"
 
 /* mesh_primitive.material for the material mesh_add_material numbered `index`; 0 (a zeroed
  * primitive) is the default material (vkrt_material_default), added to the table on first use. */
 #define MESH_MATERIAL(index) ((index) + 1u)
+
+/* A texture of the mesh's materials, its texels encoded (texture_encode_rgba8). */
+typedef struct mesh_texture {
+    uint32_t width, height;
+    uint32_t wrap;    /* wrap_u | wrap_v << 8 (VKRT_GPU_WRAP_*) */
+    uint32_t *texels; /* 2 words per texel */
+} mesh_texture;
 
 typedef struct mesh {
     uint32_t tri_count;
@@ -32,6 +40,10 @@ typedef struct mesh {
     uint32_t material_capacity;
     bool has_default_material; /* the default material is in the table, at default_material */
     uint32_t default_material;
+    uint32_t *material_textures; /* per material: its base colour texture, or VKRT_NO_TEXTURE */
+    mesh_texture *textures;
+    uint32_t texture_count;
+    uint32_t texture_capacity;
 } mesh;
 
 /* One indexed primitive handed to mesh_append_indexed(). */
@@ -47,11 +59,18 @@ typedef struct mesh_primitive {
     uint32_t material;       /* MESH_MATERIAL(index from mesh_add_material); 0: the default */
 } mesh_primitive;
 
-/* Adds a material to the table and returns its index in *out_index. A non-finite factor, or
- * one outside its range (vkrt_material), fails with `invalid` (the caller's code: a file's
- * or an argument's fault) and a message naming `source` and `what`. */
-vkrt_result mesh_add_material(core *c, mesh *m, const vkrt_material *material, vkrt_result invalid,
-                              const char *source, const char *what, uint32_t *out_index);
+/* Adds a material to the table, with its base colour texture (an index from mesh_add_texture,
+ * or VKRT_NO_TEXTURE; material->base_color_texture is not read), and returns its index in
+ * *out_index. A non-finite factor, or one outside its range (vkrt_material), fails with
+ * `invalid` (the caller's code: a file's or an argument's fault) and a message naming `source`
+ * and `what`. */
+vkrt_result mesh_add_material(core *c, mesh *m, const vkrt_material *material, uint32_t texture,
+                              vkrt_result invalid, const char *source, const char *what, uint32_t *out_index);
+
+/* Adds a texture (its texels encoded from desc->rgba8) and returns its index in *out_index. A
+ * side of 0 or over TEXTURE_MAX_SIDE, no pixels or an unknown wrap mode fails with `invalid`. */
+vkrt_result mesh_add_texture(core *c, mesh *m, const vkrt_texture_desc *desc, vkrt_result invalid,
+                             const char *source, const char *what, uint32_t *out_index);
 
 /* Appends a primitive's triangles. Checks every coordinate (and texture coordinate) is
  * finite, the material exists, and every index is below vertex_count; `source` (the file name) and `what` (e.g. "mesh 2 primitive 0") name the

@@ -13,6 +13,8 @@
 
 #include <cgltf.h>
 
+#include "stb_image_glue.h"
+
 /* Each node instance costs a stack entry and a matrix product; a hierarchy that shares
  * nodes along many levels can still expand exponentially, so the walk has a ceiling. */
 #define GLTF_MAX_NODE_VISITS (1u << 24)
@@ -173,7 +175,143 @@ typedef struct gltf_walk {
     size_t triangle_primitives;
     uint32_t *materials;       /* per glTF material: MESH_MATERIAL(its index in m), 0 until a
                                   primitive uses it */
+    uint32_t *textures;        /* per glTF texture: 1 + its index in m, 0 until used,
+                                  UINT32_MAX when it could not be read */
+    const cgltf_options *options;
 } gltf_walk;
+
+static void *glue_alloc(void *user, size_t size)
+{
+    return core_alloc(user, size);
+}
+
+static void glue_free(void *user, void *pointer)
+{
+    core_free(user, pointer);
+}
+
+/* The bytes of a glTF image: its buffer view, a base64 data: URI, or a file beside the glTF
+ * (URI percent-decoded). *owned tells the caller to free them. NULL with *reason on failure,
+ * and *out_of_memory set when that was the cause. */
+static const uint8_t *image_bytes(gltf_walk *w, const cgltf_image *image, size_t *size, bool *owned,
+                                  const char **reason, bool *out_of_memory)
+{
+    *out_of_memory = false;
+    *owned = false;
+    *size = 0;
+    if (image->buffer_view) {
+        const cgltf_buffer_view *v = image->buffer_view;
+        if (!v->buffer->data || v->offset + v->size > v->buffer->size) {
+            *reason = "its buffer view has no data";
+            return NULL;
+        }
+        *size = v->size;
+        return (const uint8_t *)v->buffer->data + v->offset;
+    }
+    if (!image->uri) {
+        *reason = "it has neither a URI nor a buffer view";
+        return NULL;
+    }
+    if (strncmp(image->uri, "data:", 5) == 0) {
+        const char *comma = strstr(image->uri, ";base64,");
+        if (!comma) {
+            *reason = "its data: URI is not base64";
+            return NULL;
+        }
+        const char *b64 = comma + 8;
+        size_t n = strlen(b64), pad = n && b64[n - 1] == '=' ? (n > 1 && b64[n - 2] == '=' ? 2 : 1) : 0;
+        *size = n / 4 * 3 - pad;
+        void *out = NULL;
+        cgltf_result cr = n % 4 ? cgltf_result_invalid_gltf : cgltf_load_buffer_base64(w->options, *size, b64, &out);
+        if (cr != cgltf_result_success) {
+            *out_of_memory = cr == cgltf_result_out_of_memory;
+            *reason = "its base64 data cannot be decoded";
+            return NULL;
+        }
+        *owned = true;
+        return out;
+    }
+    const char *slash = strrchr(w->path, '/');
+    size_t dir = slash ? (size_t)(slash - w->path) + 1 : 0, n = dir + strlen(image->uri) + 1;
+    char *file = core_alloc(w->c, n);
+    if (!file) {
+        *out_of_memory = true;
+        return NULL;
+    }
+    memcpy(file, w->path, dir);
+    strcpy(file + dir, image->uri);
+    cgltf_decode_uri(file + dir);
+    FILE *f = fopen(file, "rb");
+    core_free(w->c, file);
+    if (!f) {
+        *reason = "the file cannot be opened";
+        return NULL;
+    }
+    long length = -1;
+    uint8_t *bytes = NULL;
+    if (fseek(f, 0, SEEK_END) == 0) length = ftell(f);
+    if (length > 0 && fseek(f, 0, SEEK_SET) == 0) {
+        bytes = core_alloc(w->c, (size_t)length);
+        *out_of_memory = !bytes;
+        if (bytes && fread(bytes, 1, (size_t)length, f) != (size_t)length) {
+            core_free(w->c, bytes);
+            bytes = NULL;
+        }
+    }
+    fclose(f);
+    if (!bytes) {
+        *reason = "the file cannot be read";
+        return NULL;
+    }
+    *owned = true;
+    *size = (size_t)length;
+    return bytes;
+}
+
+static uint32_t gltf_wrap(cgltf_int mode)
+{
+    return mode == 33071 ? VKRT_WRAP_CLAMP : mode == 33648 ? VKRT_WRAP_MIRROR : VKRT_WRAP_REPEAT;
+}
+
+/* The mesh texture of a glTF texture, decoded on first use. A texture that cannot be read
+ * (missing file, undecodable image) is a warning and no texture: VKRT_NO_TEXTURE. */
+static vkrt_result texture_of(gltf_walk *w, const cgltf_texture *t, const char *what, uint32_t *out)
+{
+    *out = VKRT_NO_TEXTURE;
+    size_t k = (size_t)(t - w->data->textures);
+    if (w->textures[k]) {
+        *out = w->textures[k] == UINT32_MAX ? VKRT_NO_TEXTURE : w->textures[k] - 1;
+        return VKRT_OK;
+    }
+    w->textures[k] = UINT32_MAX;
+    const char *reason = "it has no image";
+    const char *name = t->image && t->image->uri && strncmp(t->image->uri, "data:", 5) ? t->image->uri : "(embedded)";
+    size_t size = 0;
+    bool owned = false, out_of_memory = false;
+    const uint8_t *bytes = t->image ? image_bytes(w, t->image, &size, &owned, &reason, &out_of_memory) : NULL;
+    stb_image_glue_allocator allocator = { glue_alloc, glue_free, w->c };
+    uint32_t width = 0, height = 0;
+    uint8_t *pixels = bytes ? stb_image_glue_decode_rgba8(&allocator, bytes, size, &width, &height, &reason) : NULL;
+    if (owned) core_free(w->c, (void *)bytes);
+    if (!pixels) {
+        if (out_of_memory || (reason && !strcmp(reason, "outofmem")))
+            return core_fail(w->c, VKRT_ERROR_OUT_OF_MEMORY, "%s: %s: out of memory decoding texture %s", w->path,
+                             what, name);
+        core_log(w->c, VKRT_LOG_WARN, "%s: %s: texture %s cannot be read (%s); the material has no texture", w->path,
+                 what, name, reason ? reason : "unknown");
+        return VKRT_OK;
+    }
+    vkrt_texture_desc desc = { .rgba8 = pixels, .width = width, .height = height,
+                               .wrap_u = t->sampler ? gltf_wrap(t->sampler->wrap_s) : VKRT_WRAP_REPEAT,
+                               .wrap_v = t->sampler ? gltf_wrap(t->sampler->wrap_t) : VKRT_WRAP_REPEAT };
+    uint32_t index;
+    vkrt_result r = mesh_add_texture(w->c, w->m, &desc, VKRT_ERROR_UNSUPPORTED, w->path, what, &index);
+    stb_image_glue_free(&allocator, pixels);
+    if (r != VKRT_OK) return r;
+    w->textures[k] = index + 1;
+    *out = index;
+    return VKRT_OK;
+}
 
 /* The mesh material of a primitive's glTF material, added on first use; 0 (the default) for a
  * primitive without one. Factors follow the glTF 2.0 defaults where absent; the emissive
@@ -198,8 +336,16 @@ static vkrt_result primitive_material(gltf_walk *w, const cgltf_primitive *prim,
     for (int i = 0; i < 3; i++) mat.emissive[i] = g->emissive_factor[i] * strength;
     char what[64];
     snprintf(what, sizeof what, "material %zu", k);
-    uint32_t index;
-    vkrt_result r = mesh_add_material(w->c, w->m, &mat, VKRT_ERROR_PARSE, w->path, what, &index);
+    uint32_t texture = VKRT_NO_TEXTURE, index;
+    const cgltf_texture_view *view = &g->pbr_metallic_roughness.base_color_texture;
+    if (g->has_pbr_metallic_roughness && view->texture) {
+        if (view->texcoord != 0)
+            core_log(w->c, VKRT_LOG_WARN, "%s: %s: base colour texture reads TEXCOORD_%d; TEXCOORD_0 used", w->path,
+                     what, (int)view->texcoord);
+        vkrt_result r = texture_of(w, view->texture, what, &texture);
+        if (r != VKRT_OK) return r;
+    }
+    vkrt_result r = mesh_add_material(w->c, w->m, &mat, texture, VKRT_ERROR_PARSE, w->path, what, &index);
     if (r != VKRT_OK) return r;
     *out = w->materials[k] = MESH_MATERIAL(index);
     return VKRT_OK;
@@ -703,15 +849,18 @@ vkrt_result mesh_load_gltf(core *c, const char *path, mesh *m)
         for (cgltf_size i = 0; i < data->nodes_count; i++)
             if (roots[i]) roots[root_count++] = i;
     }
-    gltf_walk w = { .c = c, .path = path, .data = data, .m = m };
+    gltf_walk w = { .c = c, .path = path, .data = data, .m = m, .options = &options };
     w.materials = core_calloc_array(c, data->materials_count ? data->materials_count : 1, sizeof *w.materials);
-    if (!w.materials) {
+    w.textures = core_calloc_array(c, data->textures_count ? data->textures_count : 1, sizeof *w.textures);
+    if (!w.materials || !w.textures) {
+        core_free(c, w.materials);
+        core_free(c, w.textures);
         r = core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "%s: out of memory", path);
         goto done;
     }
     r = walk_nodes(&w, &h, roots, root_count);
     core_free(c, w.materials);
-    w.materials = NULL;
+    core_free(c, w.textures);
     if (r != VKRT_OK) goto done;
     if (m->tri_count == 0) {
         if (w.skipped_primitives && !w.triangle_primitives)

@@ -8,6 +8,7 @@
 #include "scene_pack.h"
 
 #include <math.h>
+#include <string.h>
 
 static float sign_not_zero(float v)
 {
@@ -83,8 +84,24 @@ void scene_pack_triangles(const mesh *m, const bvh *b, vkrt_gpu_tri *tris)
     }
 }
 
-void scene_pack_surfaces(const mesh *m, vkrt_gpu_surface *surfaces, vkrt_gpu_material *materials)
+size_t scene_texel_count(const mesh *m)
 {
+    size_t n = 0;
+    for (uint32_t i = 0; i < m->texture_count; i++) n += (size_t)m->textures[i].width * m->textures[i].height;
+    return n;
+}
+
+void scene_pack_surfaces(const mesh *m, vkrt_gpu_surface *surfaces, vkrt_gpu_material *materials,
+                         vkrt_gpu_texture *textures, uint32_t *texels)
+{
+    size_t first = 0;
+    for (uint32_t i = 0; i < m->texture_count; i++) {
+        const mesh_texture *t = &m->textures[i];
+        size_t n = (size_t)t->width * t->height;
+        textures[i] = (vkrt_gpu_texture){ (uint32_t)first, t->width, t->height, t->wrap };
+        memcpy(texels + 2 * first, t->texels, n * 2 * sizeof(uint32_t));
+        first += n;
+    }
     for (uint32_t t = 0; t < m->tri_count; t++) {
         const float *uv = m->texcoords + (size_t)t * 6;
         surfaces[t] = (vkrt_gpu_surface){ uv[0], uv[1], uv[2], uv[3], uv[4], uv[5], m->material_ids[t], 0u };
@@ -97,6 +114,7 @@ void scene_pack_surfaces(const mesh *m, vkrt_gpu_surface *surfaces, vkrt_gpu_mat
             .emissive = { x->emissive[0], x->emissive[1], x->emissive[2] },
             .metallic = x->metallic,
             .roughness = x->roughness,
+            .base_color_texture = m->material_textures[i],
         };
     }
 }

@@ -12,8 +12,14 @@
 /* tris must hold m->tri_count entries. */
 void scene_pack_triangles(const mesh *m, const bvh *b, vkrt_gpu_tri *tris);
 
-/* surfaces (m->tri_count, in load order: index = prim_id) and materials (m->material_count). */
-void scene_pack_surfaces(const mesh *m, vkrt_gpu_surface *surfaces, vkrt_gpu_material *materials);
+/* Texels in all of m's textures. */
+size_t scene_texel_count(const mesh *m);
+
+/* surfaces (m->tri_count, in load order: index = prim_id), materials (m->material_count),
+ * textures (m->texture_count) and their texels, one after another (scene_texel_count, 2 words
+ * each). */
+void scene_pack_surfaces(const mesh *m, vkrt_gpu_surface *surfaces, vkrt_gpu_material *materials,
+                         vkrt_gpu_texture *textures, uint32_t *texels);
 
 /* Unit vector -> two 16-bit snorm values (x in the low half); decode is the exact inverse
  * used by the shader (normal_decode in shaders/trace_common.glsl). */

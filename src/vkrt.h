@@ -148,13 +148,32 @@ typedef enum vkrt_bvh_builder {
     VKRT_BVH_BUILDER_BINNED_SAH   /* surface area heuristic over 32 bins per axis */
 } vkrt_bvh_builder;
 
+/* How a texture repeats outside [0, 1] (glTF's sampler wrap modes). */
+typedef enum vkrt_wrap {
+    VKRT_WRAP_REPEAT = 0, /* default */
+    VKRT_WRAP_CLAMP,      /* clamp to the edge texels */
+    VKRT_WRAP_MIRROR      /* mirrored repeat */
+} vkrt_wrap;
+
+/* An image a material reads: 8-bit RGBA, colour sRGB-encoded as PNG and JPEG store it, rows top
+ * to bottom (texture coordinate (0, 0) is the top-left corner, as in glTF); sampled bilinearly
+ * at texel centres. */
+typedef struct vkrt_texture_desc {
+    const uint8_t *rgba8;  /* width * height * 4 bytes (borrowed for the vkrt_scene_create call) */
+    uint32_t width, height;/* each 1 .. 16384 */
+    vkrt_wrap wrap_u, wrap_v;
+} vkrt_texture_desc;
+
 /* How a surface looks, in the glTF 2.0 metallic-roughness model (factors; all linear). The
- * `albedo` mode shows base_color; lighting modes shade with all of it. */
+ * `albedo` mode shows the base colour; lighting modes shade with all of it. */
 typedef struct vkrt_material {
     float base_color[4]; /* RGB reflectance and alpha, each in [0, 1] */
     float metallic;      /* [0, 1]: 0 dielectric, 1 metal */
     float roughness;     /* [0, 1]: 0 mirror-smooth, 1 fully rough */
     float emissive[3];   /* emitted radiance, >= 0 */
+    const vkrt_texture_desc *base_color_texture; /* NULL (default): none; else its texel at
+                                                    the hit's texture coordinates multiplies
+                                                    base_color (borrowed for the call) */
 } vkrt_material;
 
 /* The material of a mesh that names none: grey diffuse (base colour 0.8, alpha 1, metallic
@@ -212,11 +231,13 @@ typedef struct vkrt_scene_stats {
     double load_ms, build_ms;      /* wall-clock times of parsing and BVH construction */
     uint64_t node_bytes, triangle_bytes; /* device (and CPU backend) buffers */
     float bounds_min[3], bounds_max[3];  /* of the scene as traced */
-    uint32_t materials;            /* distinct materials, the default included where used */
+    uint32_t materials;            /* materials in the table: the file's (or the meshes') that
+                                      triangles use, and the default where one names none */
+    uint32_t textures;             /* base colour textures read */
     bool has_texcoords;            /* some triangle has texture coordinates */
-    uint64_t surface_bytes;        /* texture coordinates and material per triangle, and the
-                                      material table: on the device only once a render needs
-                                      them (albedo and uv modes) */
+    uint64_t surface_bytes;        /* texture coordinates and material per triangle, the
+                                      material table and the textures: on the device only once a
+                                      render needs them (albedo and uv modes) */
 } vkrt_scene_stats;
 
 vkrt_result vkrt_scene_stats_get(const vkrt_scene *scene, vkrt_scene_stats *out_stats);

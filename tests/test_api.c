@@ -137,6 +137,14 @@ static vkrt_result op_scene_gltf(vkrt_context *ctx, long n)
     return scene_op(ctx, n, &(vkrt_scene_desc){ .path = VKRT_TEST_DATA_DIR "/instanced.gltf" });
 }
 
+/* Two PNG base colour textures, decoded by stb_image through the context's allocator. */
+static vkrt_result op_scene_textured_gltf(vkrt_context *ctx, long n)
+{
+    return scene_op(ctx, n,
+                    &(vkrt_scene_desc){ .path = VKRT_MODELS_DIR "/gltf/draco/three_meshes_two_materials_one_no_material/"
+                                                                "three_meshes_two_materials_one_no_material.gltf" });
+}
+
 /* Two in-memory meshes: an indexed quad with a transform, and a non-indexed triangle. */
 static const float quad_positions[] = { 0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0 };
 static const uint32_t quad_indices[] = { 0, 1, 2, 0, 2, 3 };
@@ -147,7 +155,10 @@ static const float quad_texcoords[] = { 0, 0, 1, 0, 1, 1, 0, 1 };
 
 static vkrt_result op_scene_memory(vkrt_context *ctx, long n)
 {
-    const vkrt_material gold = { .base_color = { 1.0f, 0.78f, 0.34f, 1.0f }, .metallic = 1.0f, .roughness = 0.3f };
+    static const uint8_t checker[16] = { 255, 255, 255, 255, 0, 0, 0, 255, 0, 0, 0, 255, 255, 255, 255, 255 };
+    const vkrt_texture_desc tex = { .rgba8 = checker, .width = 2, .height = 2 };
+    const vkrt_material gold = { .base_color = { 1.0f, 0.78f, 0.34f, 1.0f }, .metallic = 1.0f, .roughness = 0.3f,
+                                 .base_color_texture = &tex };
     vkrt_mesh_desc meshes[2] = {
         { .positions = quad_positions, .vertex_count = 4, .indices = quad_indices, .index_count = 6, .transform = shift,
           .texcoords = quad_texcoords, .material = &gold },
@@ -225,6 +236,7 @@ static void out_of_memory_at_every_cpu_allocation(void)
     oom_every_allocation("scene_create (groups.obj)", VKRT_BACKEND_CPU, op_scene_obj);
     oom_every_allocation("scene_create (instanced.gltf)", VKRT_BACKEND_CPU, op_scene_gltf);
     oom_every_allocation("scene_create (in-memory meshes)", VKRT_BACKEND_CPU, op_scene_memory);
+    oom_every_allocation("scene_create (glTF with PNG textures)", VKRT_BACKEND_CPU, op_scene_textured_gltf);
     oom_every_allocation("render (CPU)", VKRT_BACKEND_CPU, op_render);
     oom_every_allocation("render albedo (CPU)", VKRT_BACKEND_CPU, op_render_albedo);
     oom_every_allocation("image_save (.png)", VKRT_BACKEND_CPU, op_save_png);
@@ -337,6 +349,21 @@ static void scene_misuse_returns_the_exact_code(void)
         { { .base_color = { 0.5f, 0.5f, 0.5f, 1.0f }, .roughness = INFINITY }, "roughness" },
         { { .base_color = { 0.5f, 0.5f, 0.5f, 1.0f }, .emissive = { 0, -1, 0 } }, "emissive[1]" },
     };
+    /* Textures without pixels, of no size or beyond the limit, or with an unknown wrap mode. */
+    static const uint8_t pixel[4] = { 1, 2, 3, 4 };
+    const vkrt_texture_desc bad_textures[] = {
+        { .rgba8 = NULL, .width = 1, .height = 1 },
+        { .rgba8 = pixel, .width = 0, .height = 1 },
+        { .rgba8 = pixel, .width = 1, .height = 20000 },
+        { .rgba8 = pixel, .width = 1, .height = 1, .wrap_v = (vkrt_wrap)7 },
+    };
+    for (size_t i = 0; i < sizeof bad_textures / sizeof bad_textures[0]; i++) {
+        vkrt_material mat = vkrt_material_default();
+        mat.base_color_texture = &bad_textures[i];
+        vkrt_mesh_desc md = { .positions = tri_positions, .vertex_count = 3, .material = &mat };
+        CHECK_MSG(make_memory_scene(ctx, &md, &s) == VKRT_ERROR_INVALID_ARGUMENT && s == NULL, "bad texture %zu", i);
+        CHECK_MSG(strstr(vkrt_context_last_error(ctx), "texture"), "bad texture %zu: '%s'", i, vkrt_context_last_error(ctx));
+    }
     for (size_t i = 0; i < sizeof bad_materials / sizeof bad_materials[0]; i++) {
         vkrt_mesh_desc md = { .positions = tri_positions, .vertex_count = 3, .material = &bad_materials[i].material };
         CHECK_MSG(make_memory_scene(ctx, &md, &s) == VKRT_ERROR_INVALID_ARGUMENT && s == NULL, "bad material %zu", i);

@@ -17,6 +17,7 @@
 #include "cpu_trace.h"
 #include "mesh.h"
 #include "scene_pack.h"
+#include "texture.h"
 #include "trace_fixtures.h"
 
 static core c;
@@ -795,6 +796,54 @@ static void cpu_trace_rays_follow_the_documented_rules(void)
     check_ray_rules_on(cpu, VKRT_PRECISION_DOUBLE, "cpu double");
 }
 
+/* Texture arithmetic: every finite half survives half -> float -> half; floats round to the
+ * nearest half (ties to even); sampling at texel centres returns the texels, between them their
+ * blend, and each wrap mode maps coordinates outside [0, 1] as glTF defines it. */
+static void texture_halves_round_trip_and_wraps_follow_their_modes(void)
+{
+    size_t bad = 0;
+    for (uint32_t h = 0; h < 0x10000u; h++) {
+        if ((h & 0x7C00u) == 0x7C00u && (h & 0x3FFu)) continue; /* NaN */
+        bad += half_from_float(half_to_float((uint16_t)h)) != h;
+    }
+    CHECK_EQ_U64(bad, 0);
+    CHECK(half_from_float(1.0f + 0x1p-11f) == 0x3C00u);            /* a tie: to even (1.0) */
+    CHECK(half_from_float(1.0f + 3 * 0x1p-11f) == 0x3C02u);        /* a tie: to even (up) */
+    CHECK(half_from_float(65520.0f) == 0x7C00u && half_from_float(65519.0f) == 0x7BFFu);
+    CHECK(half_from_float(0x1p-24f) == 0x0001u && half_from_float(0x1p-25f) == 0x0000u);
+
+    /* 4x1 texels whose red is 0, 1/3, 2/3, 1 (exact in half after rounding, compared as such). */
+    uint8_t rgba[16];
+    static const uint8_t reds[4] = { 0, 100, 200, 255 };
+    for (int i = 0; i < 4; i++) rgba[4 * i] = reds[i], rgba[4 * i + 1] = rgba[4 * i + 2] = 0, rgba[4 * i + 3] = 255;
+    uint32_t texels[8];
+    texture_encode_rgba8(rgba, 4, 1, texels);
+    float red[4];
+    for (int i = 0; i < 4; i++) red[i] = half_to_float((uint16_t)(texels[2 * i] & 0xFFFFu));
+    CHECK(red[0] == 0.0f && red[3] == 1.0f && red[1] > 0.12f && red[1] < 0.13f); /* sRGB 100 is linear 0.127 */
+    const struct {
+        uint32_t wrap;
+        float u, expected;
+    } cases[] = {
+        { VKRT_GPU_WRAP_REPEAT, 0.125f, -1 },  { VKRT_GPU_WRAP_REPEAT, 1.125f, -1 }, { VKRT_GPU_WRAP_REPEAT, -0.875f, -1 },
+        { VKRT_GPU_WRAP_CLAMP, 1.5f, -4 },     { VKRT_GPU_WRAP_CLAMP, -3.0f, -2 },   { VKRT_GPU_WRAP_MIRROR, 1.875f, -1 },
+        { VKRT_GPU_WRAP_MIRROR, 1.125f, -4 },  { VKRT_GPU_WRAP_REPEAT, 0.25f, -3 },  { VKRT_GPU_WRAP_REPEAT, 1e31f, -5 },
+    };
+    /* expected: -1 texel 0, -2 texel 0 (clamped), -3 the blend of texels 0 and 1 halfway, -4
+     * texel 3, -5 u = 0 (a coordinate too large to wrap): the edge, texels 3 and 0 halfway. */
+    for (size_t k = 0; k < sizeof cases / sizeof cases[0]; k++) {
+        vkrt_gpu_texture t = { 0, 4, 1, cases[k].wrap | cases[k].wrap << 8 };
+        float out[4];
+        texture_sample(&t, texels, cases[k].u, 0.5f, out);
+        float want = cases[k].expected == -4   ? red[3]
+                     : cases[k].expected == -3 ? red[0] * 0.5f + red[1] * 0.5f
+                     : cases[k].expected == -5 ? red[3] * 0.5f + red[0] * 0.5f
+                                               : red[0];
+        CHECK_MSG(out[0] == want && out[3] == 1.0f, "case %zu: u %g wrap %u: red %g, expected %g", k,
+                  (double)cases[k].u, cases[k].wrap, (double)out[0], (double)want);
+    }
+}
+
 static void cpu_grazing_hit_distances_are_exact(void)
 {
     check_grazing_distances_on(cpu, cpu, "cpu float");
@@ -941,6 +990,7 @@ int main(void)
     RUN(double_reference_and_float_agree_on_camera_renders);
     RUN(eye_inside_a_closed_mesh_always_hits);
     RUN(cpu_grazing_hit_distances_are_exact);
+    RUN(texture_halves_round_trip_and_wraps_follow_their_modes);
     RUN(cpu_secondary_rays_never_rehit_their_own_triangle);
     vkrt_context_destroy(cpu);
     return check_exit();

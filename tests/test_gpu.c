@@ -348,6 +348,7 @@ static void gpu_shared_layouts_match_c(void)
     vkrt_gpu_counters counters[2];
     vkrt_gpu_surface surfaces[2];
     vkrt_gpu_material materials[2];
+    vkrt_gpu_texture textures[2];
     fill_distinct(nodes, sizeof nodes, 100.0f);
     fill_distinct(tris, sizeof tris, 200.0f);
     fill_distinct(hits, sizeof hits, 300.0f);
@@ -358,33 +359,35 @@ static void gpu_shared_layouts_match_c(void)
     fill_distinct(counters, sizeof counters, 700.0f);
     fill_distinct(surfaces, sizeof surfaces, 800.0f);
     fill_distinct(materials, sizeof materials, 900.0f);
+    fill_distinct(textures, sizeof textures, 1000.0f);
     /* The order in which layout_check.comp writes the structs out. */
-    const void *parts[] = { &nodes[1],   &tris[1],     &hits[1],     &rays[1],     &push,
-                            &states[1],  &entries[1],  &counters[1], &surfaces[1], &materials[1] };
-    const size_t part_sizes[] = { sizeof nodes[1],   sizeof tris[1],     sizeof hits[1],     sizeof rays[1],
-                                  sizeof push,       sizeof states[1],   sizeof entries[1],  sizeof counters[1],
-                                  sizeof surfaces[1], sizeof materials[1] };
+    const void *parts[] = { &nodes[1],   &tris[1],     &hits[1],     &rays[1],     &push,        &states[1],
+                            &entries[1], &counters[1], &surfaces[1], &materials[1], &textures[1] };
+    const size_t part_sizes[] = { sizeof nodes[1],    sizeof tris[1],      sizeof hits[1],     sizeof rays[1],
+                                  sizeof push,        sizeof states[1],    sizeof entries[1],  sizeof counters[1],
+                                  sizeof surfaces[1], sizeof materials[1], sizeof textures[1] };
     uint32_t expected[128];
     size_t words = 0;
-    for (int i = 0; i < 10; i++) {
+    for (int i = 0; i < 11; i++) {
         memcpy(expected + words, parts[i], part_sizes[i]);
         words += part_sizes[i] / 4;
     }
     CHECK(words <= 128);
 
-    /* Bindings 0-2 and 4-9 are inputs; binding 3 receives the words. */
-    vk_buffer buffers[10] = { 0 };
-    const void *data[10] = { nodes, tris, hits, NULL, rays, states, entries, counters, surfaces, materials };
-    const size_t sizes[10] = { sizeof nodes,  sizeof tris,     sizeof hits,     128 * 4,         sizeof rays,
-                               sizeof states, sizeof entries,  sizeof counters, sizeof surfaces, sizeof materials };
-    bool ok = create_check_buffers(buffers, data, sizes, 10);
-    ok = ok && run_check_shader("layout_check.comp", vkrt_shader_layout_check_comp, buffers, 10, &push, sizeof push, 1);
+    /* Bindings 0-2 and 4-10 are inputs; binding 3 receives the words. */
+    vk_buffer buffers[11] = { 0 };
+    const void *data[11] = { nodes, tris, hits, NULL, rays, states, entries, counters, surfaces, materials, textures };
+    const size_t sizes[11] = { sizeof nodes,     sizeof tris,      sizeof hits,     128 * 4,
+                               sizeof rays,      sizeof states,    sizeof entries,  sizeof counters,
+                               sizeof surfaces,  sizeof materials, sizeof textures };
+    bool ok = create_check_buffers(buffers, data, sizes, 11);
+    ok = ok && run_check_shader("layout_check.comp", vkrt_shader_layout_check_comp, buffers, 11, &push, sizeof push, 1);
     if (ok) {
         const uint32_t *got = buffers[3].mapped;
         for (size_t i = 0; i < words; i++)
             CHECK_MSG(got[i] == expected[i], "word %zu: shader read 0x%08x, C wrote 0x%08x", i, got[i], expected[i]);
     }
-    for (int i = 0; i < 10; i++) vk_buffer_destroy(gpu->vk, &buffers[i]);
+    for (int i = 0; i < 11; i++) vk_buffer_destroy(gpu->vk, &buffers[i]);
 }
 
 /* ray_offset() in GLSL against the C function, bit for bit, on hit points from 1e-30 to 1e30,
@@ -840,6 +843,58 @@ static void gpu_albedo_and_uv_show_materials_and_texture_coordinates(void)
             }
         CHECK_MSG(hits > (size_t)w * h / 4 && wrong == 0, "mode %d: %zu of %zu decided pixels wrong", (int)d.mode, wrong,
                   hits);
+        free(g);
+        free(c);
+    }
+    vkrt_scene_destroy(sg);
+    vkrt_scene_destroy(sc);
+
+    /* A textured square: 2x2 texels (sRGB 0, 64, 128, 255 in red; alpha 255), repeat in u and
+     * clamp in v, the unit square's coordinates times 2 in u. Every decided pixel's albedo is
+     * the base colour times the bilinear blend of the decoded texels, computed here in double. */
+    static const uint8_t texels8[16] = { 0, 10, 20, 255, 64, 10, 20, 255, 128, 10, 20, 255, 255, 10, 20, 255 };
+    const vkrt_texture_desc tex = { .rgba8 = texels8, .width = 2, .height = 2, .wrap_u = VKRT_WRAP_REPEAT,
+                                    .wrap_v = VKRT_WRAP_CLAMP };
+    const vkrt_material textured = { .base_color = { 1.0f, 0.5f, 1.0f, 1.0f }, .roughness = 1.0f,
+                                     .base_color_texture = &tex };
+    static const float uv2[8] = { 0, 0, 2, 0, 2, 1, 0, 1 };
+    vkrt_mesh_desc one = { .positions = pos[1], .vertex_count = 4, .indices = idx, .index_count = 6, .texcoords = uv2,
+                           .material = &textured };
+    sd = (vkrt_scene_desc){ .meshes = &one, .mesh_count = 1, .keep_world_coordinates = true };
+    CHECK(vkrt_scene_create(gpu, &sd, &sg) == VKRT_OK);
+    CHECK(vkrt_scene_create(cpu, &sd, &sc) == VKRT_OK);
+    d.mode = VKRT_MODE_ALBEDO;
+    if (sg && sc) {
+        float *g = render(gpu, sg, &d), *c = render(cpu, sc, &d);
+        CHECK_MSG(g && c && memcmp(g, c, (size_t)w * h * 4 * sizeof *g) == 0, "textured albedo: GPU and CPU differ");
+        double lin[4];
+        for (int i = 0; i < 4; i++) {
+            double s = texels8[4 * i] / 255.0;
+            lin[i] = s <= 0.04045 ? s / 12.92 : pow((s + 0.055) / 1.055, 2.4);
+        }
+        size_t hits = 0, wrong = 0;
+        double max_err = 0.0;
+        for (uint32_t y = 0; g && y < h; y++)
+            for (uint32_t x = 0; x < w; x++) {
+                double sx = 2.0 * (x + 0.5) / w - 1.0, sy = 1.0 - 2.0 * (y + 0.5) / h;
+                double hx = 2.0 * sx * half, hy = 2.0 * sy * half;
+                if (!(hx > 0.05 && hx < 0.95 && fabs(hy) < 0.45)) continue;
+                hits++;
+                double u = 2.0 * hx, v = hy + 0.5; /* corners 0 and 1 (y = -0.5) have v = 0 */
+                double tu = u - floor(u), px = tu * 2 - 0.5, py = fmin(fmax(v, -1.0), 2.0) * 2 - 0.5;
+                double fx = px - floor(px), fy = py - floor(py);
+                int ix = (int)floor(px), iy = (int)floor(py);
+                int xa = (ix + 2) % 2, xb = (ix + 3) % 2;
+                int ya = iy < 0 ? 0 : (iy > 1 ? 1 : iy), yb = iy + 1 < 0 ? 0 : (iy + 1 > 1 ? 1 : iy + 1);
+                double red = (lin[ya * 2 + xa] * (1 - fx) + lin[ya * 2 + xb] * fx) * (1 - fy) +
+                             (lin[yb * 2 + xa] * (1 - fx) + lin[yb * 2 + xb] * fx) * fy;
+                const float *p = g + ((size_t)y * w + x) * 4;
+                double err = fabs(p[0] - red);
+                max_err = fmax(max_err, err);
+                wrong += err > 2e-3 || fabs(p[3] - 1.0) > 1e-3;
+            }
+        CHECK_MSG(hits > 100 && wrong == 0, "textured albedo: %zu of %zu pixels off (max error %.3g)", wrong, hits,
+                  max_err);
         free(g);
         free(c);
     }

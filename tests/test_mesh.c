@@ -875,9 +875,43 @@ static void every_allocation_failure_is_out_of_memory_and_leaks_nothing(void)
     }
 }
 
+static char last_warning[512];
+
+static void on_log(void *user, vkrt_log_level level, const char *message)
+{
+    (void)user;
+    if (level == VKRT_LOG_WARN) snprintf(last_warning, sizeof last_warning, "%s", message);
+}
+
+/* Base colour textures: read from PNG files beside the glTF, one table entry per texture, each
+ * material pointing at its own; a texture file that does not exist is a warning naming it, and
+ * the material keeps its factors without a texture. */
+static void gltf_base_colour_textures_load_and_a_missing_one_is_a_warning(void)
+{
+    mesh m;
+    CHECK_MSG(load(MODEL("gltf/draco/three_meshes_two_materials_one_no_material/"
+                         "three_meshes_two_materials_one_no_material.gltf"), &m) == VKRT_OK, "%s", g_core.last_error);
+    CHECK_EQ_U64(m.texture_count, 2);
+    size_t textured = 0;
+    for (uint32_t i = 0; i < m.material_count; i++) textured += m.material_textures[i] != VKRT_NO_TEXTURE;
+    CHECK_EQ_U64(textured, 2);
+    for (uint32_t i = 0; i < m.texture_count; i++)
+        CHECK_MSG(m.textures[i].width >= 16 && m.textures[i].height >= 16 && m.textures[i].texels,
+                  "texture %u is %ux%u", i, m.textures[i].width, m.textures[i].height);
+    mesh_destroy(&g_core, &m);
+
+    last_warning[0] = '\0';
+    CHECK_MSG(load(VKRT_TEST_DATA_DIR "/missing_texture.gltf", &m) == VKRT_OK, "%s", g_core.last_error);
+    CHECK_EQ_U64(m.texture_count, 0);
+    CHECK(m.material_count == 1 && m.material_textures[0] == VKRT_NO_TEXTURE && m.materials[0].base_color[2] == 1.0f);
+    CHECK_MSG(strstr(last_warning, "does_not_exist.png") && strstr(last_warning, "missing_texture.gltf"),
+              "warning: '%s'", last_warning);
+    mesh_destroy(&g_core, &m);
+}
+
 int main(void)
 {
-    core_init(&g_core, NULL, NULL, NULL);
+    core_init(&g_core, NULL, on_log, NULL);
     RUN(obj_quads_and_ngons_are_fanned_from_the_first_corner);
     RUN(obj_negative_indices_are_relative_to_the_vertices_so_far);
     RUN(obj_objects_and_groups_append_in_file_order_with_file_or_computed_normals);
@@ -910,6 +944,7 @@ int main(void)
     RUN(builtin_scene_is_large_finite_unit_normalled_and_outward);
     RUN(obj_texture_coordinates_follow_the_faces);
     RUN(gltf_materials_and_texture_coordinates_load);
+    RUN(gltf_base_colour_textures_load_and_a_missing_one_is_a_warning);
     RUN(every_allocation_failure_is_out_of_memory_and_leaks_nothing);
     remove_temp_dir();
     return check_exit();

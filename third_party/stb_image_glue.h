@@ -1,0 +1,30 @@
+/* Image decoding through stb_image (PNG, JPEG and the other formats it reads), with every
+ * allocation going to the caller's allocator so vkrt's out-of-memory tests reach it too. */
+#ifndef STB_IMAGE_GLUE_H
+#define STB_IMAGE_GLUE_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+typedef struct stb_image_glue_allocator {
+    void *(*alloc)(void *user, size_t size);
+    void (*free)(void *user, void *pointer);
+    void *user;
+} stb_image_glue_allocator;
+
+/* Decodes `size` bytes to 8-bit RGBA rows, top row first. Returns the pixels, allocated with
+ * `allocator` (release them with stb_image_glue_free), or NULL with *reason saying why (stb's
+ * own words, e.g. "outofmem" or "unknown image type"). */
+uint8_t *stb_image_glue_decode_rgba8(const stb_image_glue_allocator *allocator, const void *bytes, size_t size,
+                                     uint32_t *out_width, uint32_t *out_height, const char **reason);
+void stb_image_glue_free(const stb_image_glue_allocator *allocator, uint8_t *pixels);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif
