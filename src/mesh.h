@@ -72,6 +72,15 @@ vkrt_result mesh_add_material(core *c, mesh *m, const vkrt_material *material, u
 vkrt_result mesh_add_texture(core *c, mesh *m, const vkrt_texture_desc *desc, vkrt_result invalid,
                              const char *source, const char *what, uint32_t *out_index);
 
+/* Decodes an image (PNG, JPEG and the other formats stb_image reads) and adds it as a texture.
+ * An image that cannot be decoded is a warning naming `name` (with `source` and `what`) and
+ * *out_index = VKRT_NO_TEXTURE: only running out of memory fails. */
+vkrt_result mesh_add_texture_image(core *c, mesh *m, const void *bytes, size_t size, vkrt_wrap wrap_u, vkrt_wrap wrap_v,
+                                   const char *name, const char *source, const char *what, uint32_t *out_index);
+/* The same for the image file at path; a missing or unreadable file is a warning too. */
+vkrt_result mesh_add_texture_file(core *c, mesh *m, const char *path, vkrt_wrap wrap_u, vkrt_wrap wrap_v,
+                                  const char *source, const char *what, uint32_t *out_index);
+
 /* Appends a primitive's triangles. Checks every coordinate (and texture coordinate) is
  * finite, the material exists, and every index is below vertex_count; `source` (the file name) and `what` (e.g. "mesh 2 primitive 0") name the
  * culprit in the failure message: VKRT_ERROR_INVALID_GEOMETRY or VKRT_ERROR_OUT_OF_MEMORY. */

@@ -13,8 +13,6 @@
 
 #include <cgltf.h>
 
-#include "stb_image_glue.h"
-
 /* Each node instance costs a stack entry and a matrix product; a hierarchy that shares
  * nodes along many levels can still expand exponentially, so the walk has a ceiling. */
 #define GLTF_MAX_NODE_VISITS (1u << 24)
@@ -180,16 +178,6 @@ typedef struct gltf_walk {
     const cgltf_options *options;
 } gltf_walk;
 
-static void *glue_alloc(void *user, size_t size)
-{
-    return core_alloc(user, size);
-}
-
-static void glue_free(void *user, void *pointer)
-{
-    core_free(user, pointer);
-}
-
 /* The bytes of a glTF image: its buffer view, a base64 data: URI, or a file beside the glTF
  * (URI percent-decoded). *owned tells the caller to free them. NULL with *reason on failure,
  * and *out_of_memory set when that was the cause. */
@@ -268,7 +256,7 @@ static const uint8_t *image_bytes(gltf_walk *w, const cgltf_image *image, size_t
     return bytes;
 }
 
-static uint32_t gltf_wrap(cgltf_int mode)
+static vkrt_wrap gltf_wrap(cgltf_int mode)
 {
     return mode == 33071 ? VKRT_WRAP_CLAMP : mode == 33648 ? VKRT_WRAP_MIRROR : VKRT_WRAP_REPEAT;
 }
@@ -289,25 +277,19 @@ static vkrt_result texture_of(gltf_walk *w, const cgltf_texture *t, const char *
     size_t size = 0;
     bool owned = false, out_of_memory = false;
     const uint8_t *bytes = t->image ? image_bytes(w, t->image, &size, &owned, &reason, &out_of_memory) : NULL;
-    stb_image_glue_allocator allocator = { glue_alloc, glue_free, w->c };
-    uint32_t width = 0, height = 0;
-    uint8_t *pixels = bytes ? stb_image_glue_decode_rgba8(&allocator, bytes, size, &width, &height, &reason) : NULL;
-    if (owned) core_free(w->c, (void *)bytes);
-    if (!pixels) {
-        if (out_of_memory || (reason && !strcmp(reason, "outofmem")))
-            return core_fail(w->c, VKRT_ERROR_OUT_OF_MEMORY, "%s: %s: out of memory decoding texture %s", w->path,
-                             what, name);
+    if (out_of_memory)
+        return core_fail(w->c, VKRT_ERROR_OUT_OF_MEMORY, "%s: %s: out of memory reading texture %s", w->path, what, name);
+    if (!bytes) {
         core_log(w->c, VKRT_LOG_WARN, "%s: %s: texture %s cannot be read (%s); the material has no texture", w->path,
-                 what, name, reason ? reason : "unknown");
+                 what, name, reason);
         return VKRT_OK;
     }
-    vkrt_texture_desc desc = { .rgba8 = pixels, .width = width, .height = height,
-                               .wrap_u = t->sampler ? gltf_wrap(t->sampler->wrap_s) : VKRT_WRAP_REPEAT,
-                               .wrap_v = t->sampler ? gltf_wrap(t->sampler->wrap_t) : VKRT_WRAP_REPEAT };
+    vkrt_wrap wrap_u = t->sampler ? gltf_wrap(t->sampler->wrap_s) : VKRT_WRAP_REPEAT;
+    vkrt_wrap wrap_v = t->sampler ? gltf_wrap(t->sampler->wrap_t) : VKRT_WRAP_REPEAT;
     uint32_t index;
-    vkrt_result r = mesh_add_texture(w->c, w->m, &desc, VKRT_ERROR_UNSUPPORTED, w->path, what, &index);
-    stb_image_glue_free(&allocator, pixels);
-    if (r != VKRT_OK) return r;
+    vkrt_result r = mesh_add_texture_image(w->c, w->m, bytes, size, wrap_u, wrap_v, name, w->path, what, &index);
+    if (owned) core_free(w->c, (void *)bytes);
+    if (r != VKRT_OK || index == VKRT_NO_TEXTURE) return r;
     w->textures[k] = index + 1;
     *out = index;
     return VKRT_OK;

@@ -21,11 +21,17 @@ typedef struct obj_tri {
     int64_t vn[3]; /* 0-based normal indices, or -1 where the face has no complete set */
     int64_t vt[3]; /* 0-based texture coordinate indices, or -1 likewise */
     size_t face;   /* 1-based `f` statement it came from */
+    int material;  /* index into the .mtl materials (`usemtl`), -1: the default */
 } obj_tri;
 
 typedef struct obj_state {
     core *c;
+    mesh *m;               /* the materials go straight into it */
     const char *path;
+    char *directory;       /* of path, ending in '/' ("" for the current one): .mtl and textures */
+    uint32_t *materials;   /* per .mtl material: MESH_MATERIAL(its index in m) */
+    size_t material_count, material_capacity;
+    int current_material;
     const char *text;
     size_t size;
     vkrt_result error; /* first failure inside a callback; later statements are ignored */
@@ -201,6 +207,67 @@ static void on_texcoord(void *user, float u, float v)
                 "texture coordinate", "texture coordinates");
 }
 
+static float clamp01(float v)
+{
+    return v > 0.0f ? (v < 1.0f ? v : 1.0f) : 0.0f; /* NaN: 0 */
+}
+
+/* An .mtl material as a vkrt_material: Kd the base colour, d its alpha, Ns (a Phong exponent)
+ * the roughness whose GGX lobe has the same width, sqrt(sqrt(2 / (Ns + 2))) (Walter et al.
+ * 2007), Ke the emission; OBJ has no metals. map_Kd is read relative to the .obj. */
+static void add_material(obj_state *s, const tinyobj_shim_material *src, size_t index)
+{
+    vkrt_material mat = { .base_color = { clamp01(src->diffuse[0]), clamp01(src->diffuse[1]),
+                                          clamp01(src->diffuse[2]), clamp01(src->dissolve) } };
+    double ns = src->shininess > 0.0f ? (double)src->shininess : 0.0;
+    mat.roughness = clamp01((float)sqrt(sqrt(2.0 / (ns + 2.0))));
+    for (int k = 0; k < 3; k++) mat.emissive[k] = src->emission[k] > 0.0f && isfinite(src->emission[k]) ? src->emission[k] : 0.0f;
+    char what[96];
+    snprintf(what, sizeof what, "material %zu (%.40s)", index, src->name);
+    uint32_t texture = VKRT_NO_TEXTURE, mesh_index = 0;
+    vkrt_result r = VKRT_OK;
+    if (src->diffuse_texture[0]) {
+        size_t n = strlen(s->directory) + strlen(src->diffuse_texture) + 1;
+        char *file = core_alloc(s->c, n);
+        if (!file) r = core_fail(s->c, VKRT_ERROR_OUT_OF_MEMORY, "%s: out of memory reading materials", s->path);
+        if (file) {
+            snprintf(file, n, "%s%s", s->directory, src->diffuse_texture);
+            r = mesh_add_texture_file(s->c, s->m, file, VKRT_WRAP_REPEAT, VKRT_WRAP_REPEAT, s->path, what, &texture);
+            core_free(s->c, file);
+        }
+    }
+    if (r == VKRT_OK) r = mesh_add_material(s->c, s->m, &mat, texture, VKRT_ERROR_PARSE, s->path, what, &mesh_index);
+    if (r != VKRT_OK) {
+        fail_in_callback(s, r);
+        return;
+    }
+    s->materials[index] = MESH_MATERIAL(mesh_index);
+}
+
+/* `mtllib`: the materials read so far; those not seen before join the mesh's table. */
+static void on_materials(void *user, const tinyobj_shim_material *materials, size_t count)
+{
+    obj_state *s = user;
+    if (s->error || count <= s->material_count) return;
+    if (core_grow(s->c, (void **)&s->materials, &s->material_capacity, count, sizeof *s->materials)) {
+        fail_in_callback(s, core_fail(s->c, VKRT_ERROR_OUT_OF_MEMORY, "%s: out of memory reading materials", s->path));
+        return;
+    }
+    for (size_t i = s->material_count; i < count && !s->error; i++) add_material(s, &materials[i], i);
+    if (!s->error) s->material_count = count;
+}
+
+static void on_group(void *user);
+
+/* `usemtl`: the faces that follow have this material, in a primitive of their own. */
+static void on_use_material(void *user, int index)
+{
+    obj_state *s = user;
+    if (s->error || index == s->current_material) return;
+    s->current_material = index;
+    on_group(s);
+}
+
 /* 1-based or negative (relative) OBJ index to 0-based; false for 0, which OBJ does not allow
  * (tinyobjloader also yields 0 for a missing or non-numeric index). */
 static bool resolve(int raw, size_t count, int64_t *out)
@@ -253,6 +320,7 @@ static void on_face(void *user, const tinyobj_shim_corner *corners, size_t count
     for (size_t k = 1; k + 1 < count; k++) {
         obj_tri *t = &s->tris[s->tri_count++];
         t->face = face;
+        t->material = s->current_material;
         t->v[0] = v0;
         resolve(corners[k].v, s->position_count, &t->v[1]);
         resolve(corners[k + 1].v, s->position_count, &t->v[2]);
@@ -342,8 +410,13 @@ static vkrt_result append_object(obj_state *s, mesh *m, size_t first, size_t las
     char what[64];
     snprintf(what, sizeof what, "object %zu", object);
     size_t base = m->tri_count;
-    r = mesh_append_indexed(c, m, &(mesh_primitive){ .positions = local, .vertex_count = used,
-                                                     .indices = indices, .index_count = 3 * tris },
+    int material = s->tris[first].material; /* one per object: `usemtl` starts a new one */
+    r = mesh_append_indexed(c, m,
+                            &(mesh_primitive){ .positions = local, .vertex_count = used, .indices = indices,
+                                               .index_count = 3 * tris,
+                                               .material = material >= 0 && (size_t)material < s->material_count
+                                                               ? s->materials[material]
+                                                               : 0 },
                             s->path, what);
     if (r != VKRT_OK) goto done;
     /* The file's own normals replace the computed ones on faces that give one per corner. */
@@ -358,7 +431,8 @@ static vkrt_result append_object(obj_state *s, mesh *m, size_t first, size_t las
             for (int j = 0; j < 3; j++) out[j] = (float)(n[j] / len);
         }
     }
-    /* And their texture coordinates, where a face gives one per corner. */
+    /* And their texture coordinates, where a face gives one per corner. OBJ puts v = 0 at the
+     * bottom of an image, glTF (and vkrt) at the top: v is flipped. */
     for (size_t t = 0; t < tris; t++) {
         const obj_tri *src = &s->tris[first + t];
         if (src->vt[0] < 0) continue;
@@ -366,7 +440,7 @@ static vkrt_result append_object(obj_state *s, mesh *m, size_t first, size_t las
         for (int k = 0; k < 3; k++) {
             const float *uv = s->texcoords + 3 * (size_t)src->vt[k];
             m->texcoords[(base + t) * 6 + 2 * k] = uv[0];
-            m->texcoords[(base + t) * 6 + 2 * k + 1] = uv[1];
+            m->texcoords[(base + t) * 6 + 2 * k + 1] = 1.0f - uv[1];
         }
     }
 done:
@@ -422,7 +496,7 @@ static vkrt_result check_indices(obj_state *s)
 vkrt_result mesh_load_obj(core *c, const char *path, mesh *m)
 {
     memset(m, 0, sizeof *m);
-    obj_state s = { .c = c, .path = path };
+    obj_state s = { .c = c, .m = m, .path = path, .current_material = -1 };
     uint32_t *remap = NULL;
     char *text = NULL;
     size_t size = 0;
@@ -442,12 +516,21 @@ vkrt_result mesh_load_obj(core *c, const char *path, mesh *m)
         goto done;
     }
 
+    const char *slash = strrchr(path, '/');
+    size_t dir_length = slash ? (size_t)(slash - path) + 1 : 0;
+    if (!(s.directory = core_alloc(c, dir_length + 1))) {
+        r = core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "%s: out of memory", path);
+        goto done;
+    }
+    memcpy(s.directory, path, dir_length);
+    s.directory[dir_length] = '\0';
     on_group(&s); /* faces before any `o` or `g` form the first object */
     char message[256];
     tinyobj_shim_status status = tinyobj_shim_parse(
-        text, size,
+        text, size, dir_length ? s.directory : "./",
         &(tinyobj_shim_callbacks){ .user = &s, .vertex = on_vertex, .normal = on_normal, .texcoord = on_texcoord,
-                                   .face = on_face, .group = on_group },
+                                   .face = on_face, .group = on_group, .materials = on_materials,
+                                   .use_material = on_use_material },
         message, sizeof message);
     if (s.error) {
         r = s.error;
@@ -503,6 +586,8 @@ done:
     core_free(c, s.normals);
     core_free(c, s.texcoords);
     core_free(c, s.tris);
+    core_free(c, s.directory);
+    core_free(c, s.materials);
     core_free(c, s.object_starts);
     return r;
 }

@@ -9,6 +9,7 @@
 
 #include "check.h"
 #include "mesh.h"
+#include "texture.h"
 
 #define MODEL(rel) VKRT_MODELS_DIR "/" rel
 #define DATA(rel) VKRT_TEST_DATA_DIR "/" rel
@@ -235,20 +236,21 @@ static void obj_file_normals_are_used_when_every_corner_has_one(void)
     mesh_destroy(&g_core, &m);
 }
 
-/* vt records reach the corners of faces that give one per corner; others get (0, 0), and a
- * texture index that names no vt is dropped like a missing normal. */
+/* vt records reach the corners of faces that give one per corner, v flipped (OBJ's v = 0 is
+ * the bottom of the image, vkrt's the top); others get (0, 0), and a texture index that names
+ * no vt is dropped like a missing normal. */
 static void obj_texture_coordinates_follow_the_faces(void)
 {
     mesh m;
     CHECK_MSG(load(VKRT_TEST_DATA_DIR "/textured.obj", &m) == VKRT_OK, "%s", g_core.last_error);
     CHECK_EQ_U64(m.tri_count, 4);
     CHECK(m.has_texcoords);
-    static const float expected[4][6] = { { 0, 0, 1, 0, 1, 1 }, { 0, 0, 1, 1, 0, 1 }, { 0 }, { 0 } };
+    static const float expected[4][6] = { { 0, 1, 1, 1, 1, 0 }, { 0, 1, 1, 0, 0, 0 }, { 0 }, { 0 } };
     for (uint32_t t = 0; t < m.tri_count && t < 4; t++)
         for (int k = 0; k < 6; k++)
             CHECK_MSG(m.texcoords[t * 6 + k] == expected[t][k], "triangle %u texcoord %d is %g, expected %g", t, k,
                       (double)m.texcoords[t * 6 + k], (double)expected[t][k]);
-    /* No materials in an OBJ yet: every triangle has the default. */
+    /* No mtllib: every triangle has the default material. */
     CHECK_EQ_U64(m.material_count, 1);
     vkrt_material def = vkrt_material_default();
     CHECK(m.material_count && memcmp(&m.materials[0], &def, sizeof def) == 0);
@@ -877,6 +879,41 @@ static void every_allocation_failure_is_out_of_memory_and_leaks_nothing(void)
 
 static char last_warning[512];
 
+/* .mtl materials: Kd (clamped to [0, 1]) and d the base colour, Ns the roughness of the same
+ * lobe width, Ke the emission, map_Kd a texture beside the file; `usemtl` switches per face, an
+ * unknown name gives the default, and a material used twice is one table entry. */
+static void obj_mtl_materials_and_textures_follow_usemtl(void)
+{
+    mesh m;
+    CHECK_MSG(load(VKRT_TEST_DATA_DIR "/materials.obj", &m) == VKRT_OK, "%s", g_core.last_error);
+    CHECK_EQ_U64(m.tri_count, 5);
+    CHECK_EQ_U64(m.material_count, 3);
+    CHECK_EQ_U64(m.texture_count, 1);
+    if (m.tri_count != 5 || m.material_count != 3 || m.texture_count != 1) {
+        mesh_destroy(&g_core, &m);
+        return;
+    }
+    vkrt_material def = vkrt_material_default();
+    const uint32_t *id = m.material_ids;
+    CHECK(memcmp(&m.materials[id[0]], &def, sizeof def) == 0 && id[3] == id[0]);
+    CHECK(id[1] == id[4] && id[1] != id[0] && id[2] != id[1] && id[2] != id[0]);
+    const vkrt_material *red = &m.materials[id[1]], *checker = &m.materials[id[2]];
+    CHECK(red->base_color[0] == 0.75f && red->base_color[1] == 0.25f && red->base_color[2] == 0.0f &&
+          red->base_color[3] == 0.5f);
+    CHECK_MSG(fabs(red->roughness - pow(2.0 / 16.0, 0.25)) < 1e-6, "Ns 14: roughness %g", (double)red->roughness);
+    CHECK(red->emissive[0] == 2.0f && red->emissive[1] == 1.0f && red->emissive[2] == 0.0f && red->metallic == 0.0f);
+    CHECK(m.material_textures[id[1]] == VKRT_NO_TEXTURE && m.material_textures[id[2]] == 0);
+    CHECK(checker->base_color[0] == 1.0f && checker->base_color[3] == 1.0f && checker->roughness == 1.0f);
+    CHECK(m.textures[0].width == 2 && m.textures[0].height == 2);
+    /* Texel (1, 1) is white at alpha 128/255: linear 1, 1, 1 and alpha 0.502 as halves. */
+    float texel[4];
+    vkrt_gpu_texture t = { 0, 2, 2, 0 };
+    texture_sample(&t, m.textures[0].texels, 0.75f, 0.75f, texel);
+    CHECK_MSG(texel[0] == 1.0f && texel[1] == 1.0f && fabsf(texel[3] - 128.0f / 255.0f) < 1e-3f, "texel (1, 1): %g %g %g %g",
+              (double)texel[0], (double)texel[1], (double)texel[2], (double)texel[3]);
+    mesh_destroy(&g_core, &m);
+}
+
 static void on_log(void *user, vkrt_log_level level, const char *message)
 {
     (void)user;
@@ -945,6 +982,7 @@ int main(void)
     RUN(obj_texture_coordinates_follow_the_faces);
     RUN(gltf_materials_and_texture_coordinates_load);
     RUN(gltf_base_colour_textures_load_and_a_missing_one_is_a_warning);
+    RUN(obj_mtl_materials_and_textures_follow_usemtl);
     RUN(every_allocation_failure_is_out_of_memory_and_leaks_nothing);
     remove_temp_dir();
     return check_exit();

@@ -72,6 +72,33 @@ void on_object(void *user, const char *)
     if (cb->group) cb->group(cb->user);
 }
 
+void on_materials(void *user, const tinyobj::material_t *materials, int count)
+{
+    const tinyobj_shim_callbacks *cb = static_cast<context *>(user)->callbacks;
+    if (!cb->materials || count <= 0) return;
+    std::vector<tinyobj_shim_material> out(static_cast<size_t>(count));
+    for (int i = 0; i < count; i++) {
+        const tinyobj::material_t &m = materials[i];
+        tinyobj_shim_material &o = out[static_cast<size_t>(i)];
+        o.name = m.name.c_str();
+        for (int k = 0; k < 3; k++) {
+            o.diffuse[k] = static_cast<float>(m.diffuse[k]);
+            o.specular[k] = static_cast<float>(m.specular[k]);
+            o.emission[k] = static_cast<float>(m.emission[k]);
+        }
+        o.shininess = static_cast<float>(m.shininess);
+        o.dissolve = static_cast<float>(m.dissolve);
+        o.diffuse_texture = m.diffuse_texname.c_str();
+    }
+    cb->materials(cb->user, out.data(), out.size());
+}
+
+void on_use_material(void *user, const char *, int index)
+{
+    const tinyobj_shim_callbacks *cb = static_cast<context *>(user)->callbacks;
+    if (cb->use_material) cb->use_material(cb->user, index);
+}
+
 void set_message(char *message, size_t message_size, const char *text)
 {
     if (!message || message_size == 0) return;
@@ -84,7 +111,7 @@ void set_message(char *message, size_t message_size, const char *text)
 
 } // namespace
 
-extern "C" tinyobj_shim_status tinyobj_shim_parse(const char *text, size_t size,
+extern "C" tinyobj_shim_status tinyobj_shim_parse(const char *text, size_t size, const char *material_dir,
                                                   const tinyobj_shim_callbacks *callbacks, char *message,
                                                   size_t message_size)
 {
@@ -101,9 +128,12 @@ extern "C" tinyobj_shim_status tinyobj_shim_parse(const char *text, size_t size,
         cb.index_cb = on_index;
         cb.group_cb = on_group;
         cb.object_cb = on_object;
+        cb.mtllib_cb = on_materials;
+        cb.usemtl_cb = on_use_material;
         std::string warn, err;
-        // No MaterialReader: vkrt ignores materials, and a missing or broken .mtl must not matter.
-        if (!tinyobj::LoadObjWithCallback(stream, cb, &ctx, nullptr, &warn, &err)) {
+        // A missing or broken .mtl only adds to warn and err: the faces keep the default material.
+        tinyobj::MaterialFileReader reader(material_dir ? material_dir : "");
+        if (!tinyobj::LoadObjWithCallback(stream, cb, &ctx, material_dir ? &reader : nullptr, &warn, &err)) {
             set_message(message, message_size, err.empty() ? "tinyobjloader failed" : err.c_str());
             return TINYOBJ_SHIM_PARSE_ERROR;
         }

@@ -1,0 +1,86 @@
+/* Texture images for the loaders: decoded by stb_image (third_party/stb_image_glue.h), every
+ * allocation through the context's allocator. A texture that cannot be read is a warning and
+ * no texture, so a model with a missing image still renders; only running out of memory fails. */
+#include "mesh.h"
+
+#include <stdio.h>
+#include <string.h>
+
+#include "stb_image_glue.h"
+#include "texture.h"
+
+static void *glue_alloc(void *user, size_t size)
+{
+    return core_alloc(user, size);
+}
+
+static void glue_free(void *user, void *pointer)
+{
+    core_free(user, pointer);
+}
+
+static void unreadable(core *c, const char *source, const char *what, const char *name, const char *reason)
+{
+    core_log(c, VKRT_LOG_WARN, "%s: %s: texture %s cannot be read (%s); the material has no texture", source, what,
+             name, reason);
+}
+
+vkrt_result mesh_add_texture_image(core *c, mesh *m, const void *bytes, size_t size, vkrt_wrap wrap_u, vkrt_wrap wrap_v,
+                                   const char *name, const char *source, const char *what, uint32_t *out_index)
+{
+    *out_index = VKRT_NO_TEXTURE;
+    stb_image_glue_allocator allocator = { glue_alloc, glue_free, c };
+    uint32_t width = 0, height = 0;
+    const char *reason = NULL;
+    uint8_t *pixels = stb_image_glue_decode_rgba8(&allocator, bytes, size, &width, &height, &reason);
+    if (!pixels) {
+        if (reason && !strcmp(reason, "outofmem"))
+            return core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "%s: %s: out of memory decoding texture %s", source, what,
+                             name);
+        unreadable(c, source, what, name, reason ? reason : "unknown image format");
+        return VKRT_OK;
+    }
+    vkrt_result r = VKRT_OK;
+    if (width > TEXTURE_MAX_SIDE || height > TEXTURE_MAX_SIDE) {
+        unreadable(c, source, what, name, "larger than 16384 texels on a side");
+    } else {
+        const vkrt_texture_desc desc = { .rgba8 = pixels, .width = width, .height = height, .wrap_u = wrap_u,
+                                         .wrap_v = wrap_v };
+        r = mesh_add_texture(c, m, &desc, VKRT_ERROR_UNSUPPORTED, source, what, out_index);
+    }
+    stb_image_glue_free(&allocator, pixels);
+    return r;
+}
+
+vkrt_result mesh_add_texture_file(core *c, mesh *m, const char *path, vkrt_wrap wrap_u, vkrt_wrap wrap_v,
+                                  const char *source, const char *what, uint32_t *out_index)
+{
+    *out_index = VKRT_NO_TEXTURE;
+    FILE *f = fopen(path, "rb");
+    if (!f) {
+        unreadable(c, source, what, path, "the file cannot be opened");
+        return VKRT_OK;
+    }
+    long length = -1;
+    uint8_t *bytes = NULL;
+    bool out_of_memory = false;
+    if (fseek(f, 0, SEEK_END) == 0) length = ftell(f);
+    if (length > 0 && fseek(f, 0, SEEK_SET) == 0) {
+        bytes = core_alloc(c, (size_t)length);
+        out_of_memory = !bytes;
+        if (bytes && fread(bytes, 1, (size_t)length, f) != (size_t)length) {
+            core_free(c, bytes);
+            bytes = NULL;
+        }
+    }
+    fclose(f);
+    if (out_of_memory)
+        return core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "%s: %s: out of memory reading texture %s", source, what, path);
+    if (!bytes) {
+        unreadable(c, source, what, path, "the file cannot be read");
+        return VKRT_OK;
+    }
+    vkrt_result r = mesh_add_texture_image(c, m, bytes, (size_t)length, wrap_u, wrap_v, path, source, what, out_index);
+    core_free(c, bytes);
+    return r;
+}
