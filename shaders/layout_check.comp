@@ -50,7 +50,7 @@ void main()
     put(f.u0); put(f.v0); put(f.u1); put(f.v1); put(f.u2); put(f.v2); put(f.material); put(f.pad0);
     vkrt_gpu_material m = materials[1];
     put(m.base_color); put(m.alpha); put(m.emissive); put(m.metallic); put(m.roughness); put(m.base_color_texture);
-    put(m.pad1); put(m.pad2);
+    put(m.alpha_cutoff); put(m.pad2);
     vkrt_gpu_texture x = textures[1];
     put(x.first); put(x.width); put(x.height); put(x.wrap);
 }

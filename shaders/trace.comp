@@ -18,6 +18,7 @@ layout(constant_id = VKRT_SPEC_RAYGEN) const uint RAYGEN = VKRT_GPU_RAYGEN_CAMER
 layout(constant_id = VKRT_SPEC_ISECT) const uint ISECT = VKRT_GPU_ISECT_WATERTIGHT;
 layout(constant_id = VKRT_SPEC_BUDGET) const uint BUDGET = 0u;
 layout(constant_id = VKRT_SPEC_COUNTERS) const uint COUNTERS = 0u;
+layout(constant_id = VKRT_SPEC_ALPHA) const uint ALPHA = 0u;
 
 layout(set = 0, binding = VKRT_BINDING_NODES, std430) readonly buffer Nodes {
     vkrt_gpu_node nodes[];
@@ -85,11 +86,17 @@ struct heat_counts {
     uint tris;
 };
 
+bool alpha_passes(uint prim, float u, float v);
+
+/* With ALPHA (a scene with alpha-masked materials) a closer hit must also pass its material's
+ * alpha test: where the surface is cut away the ray goes on. Mirrors R(test_triangle) in
+ * src/cpu_trace_real.h. */
 void test_triangle(ray r, uint index, inout hit best)
 {
     vkrt_gpu_tri tri = tris[index];
     float t, u, v;
-    if (intersect_triangle(r, tri, t, u, v) && hit_closer(t, tri.prim_id, best.t, best.prim)) {
+    if (intersect_triangle(r, tri, t, u, v) && hit_closer(t, tri.prim_id, best.t, best.prim) &&
+        (ALPHA == 0u || alpha_passes(tri.prim_id, u, v))) {
         best.t = t;
         best.u = u;
         best.v = v;
@@ -278,6 +285,20 @@ vec4 sample_texture(vkrt_gpu_texture t, vec2 uv)
     precise vec4 bottom = c01 * (1.0 - fx) + c11 * fx;
     precise vec4 result = top * (1.0 - fy) + bottom * fy;
     return result;
+}
+
+/* Whether a hit at barycentrics (u, v) on triangle prim is there: its material is opaque, or
+ * its alpha (times the texture's) reaches the cutoff. Mirrors alpha_passes() in
+ * src/cpu_trace.c. */
+bool alpha_passes(uint prim, float u, float v)
+{
+    vkrt_gpu_surface f = surfaces[prim];
+    vkrt_gpu_material m = materials[f.material];
+    if (!(m.alpha_cutoff > 0.0)) return true;
+    precise float alpha = m.alpha;
+    if (m.base_color_texture != VKRT_NO_TEXTURE)
+        alpha = alpha * sample_texture(textures[m.base_color_texture], surface_uv(f, u, v)).w;
+    return alpha >= m.alpha_cutoff;
 }
 
 /* The material's base colour and alpha, times its texture where it has one. Mirrors the

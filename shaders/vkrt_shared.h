@@ -52,6 +52,7 @@ typedef struct vkrt_float3 { float x, y, z; } vkrt_float3;
 #define VKRT_SPEC_ISECT 4
 #define VKRT_SPEC_BUDGET 5 /* BVH loop iterations per dispatch; 0 = unlimited (no budget code) */
 #define VKRT_SPEC_COUNTERS 6 /* 1: each pixel's traversal counts written out; 0: no counting code */
+#define VKRT_SPEC_ALPHA 7 /* 1: the scene has alpha-masked materials, hits are alpha tested */
 
 /* Values of the specialization constants; the C side asserts they equal the public enums. */
 #define VKRT_GPU_MODE_NORMAL 1
@@ -207,7 +208,7 @@ VKRT_STRUCT(vkrt_gpu_material) {
     float metallic;         /* offset 28 */
     float roughness;        /* offset 32 */
     VKRT_UINT base_color_texture; /* offset 36; index into the texture table, VKRT_NO_TEXTURE: none */
-    VKRT_UINT pad1;         /* offset 40 */
+    float alpha_cutoff;     /* offset 40; > 0: alpha MASK (vkrt_material.alpha_cutoff) */
     VKRT_UINT pad2;         /* offset 44 */
 };
 

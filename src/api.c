@@ -144,6 +144,7 @@ static void fill_stats(vkrt_scene *s, const mesh *m, double load_ms)
     st->materials = m->material_count;
     st->has_texcoords = m->has_texcoords;
     st->textures = m->texture_count;
+    st->alpha_tested = s->alpha_tested;
     st->surface_bytes = (uint64_t)m->tri_count * sizeof(vkrt_gpu_surface) +
                         (uint64_t)m->material_count * sizeof(vkrt_gpu_material) +
                         (uint64_t)m->texture_count * sizeof(vkrt_gpu_texture) + (uint64_t)scene_texel_count(m) * 8u;
@@ -246,6 +247,7 @@ vkrt_result vkrt_scene_create(vkrt_context *ctx, const vkrt_scene_desc *desc, vk
     }
     s->material_count = m.material_count;
     s->texture_count = m.texture_count;
+    for (uint32_t i = 0; i < m.material_count; i++) s->alpha_tested |= m.materials[i].alpha_cutoff > 0.0f;
     if (!m.texture_count) memset(s->textures, 0, sizeof *s->textures);
     if (!s->texel_count) memset(s->texels, 0, 2 * sizeof *s->texels);
     scene_pack_surfaces(&m, s->surfaces, s->materials, s->textures, s->texels);
@@ -271,6 +273,33 @@ vkrt_result vkrt_scene_stats_get(const vkrt_scene *scene, vkrt_scene_stats *out_
 }
 
 /* ---- rendering ---- */
+
+/* The scene as the CPU tracer reads it. */
+static cpu_trace_scene cpu_scene_of(const vkrt_scene *scene)
+{
+    return (cpu_trace_scene){
+        .nodes = scene->bvh.nodes, .node_count = scene->bvh.node_count, .tris = scene->tris,
+        .tri_count = scene->bvh.tri_count, .surfaces = scene->surfaces, .materials = scene->materials,
+        .textures = scene->textures, .texels = scene->texels, .alpha_tested = scene->alpha_tested,
+    };
+}
+
+/* On the GPU, the surfaces go to the device the first time a render reads them: a mode that
+ * shows them (`needed`), or any trace of an alpha-tested scene. */
+static vkrt_result ensure_surfaces(vkrt_scene *scene, bool needed)
+{
+    if (!scene->ctx->vk || !(needed || scene->alpha_tested)) return VKRT_OK;
+    const gpu_surface_data data = {
+        scene->surfaces,
+        scene->materials,
+        scene->material_count,
+        scene->textures,
+        scene->texture_count ? scene->texture_count : 1,
+        scene->texels,
+        scene->texel_count ? scene->texel_count : 1,
+    };
+    return gpu_scene_upload_surfaces(scene->ctx->vk, &scene->gpu, &data);
+}
 
 /* The intersector and precision fields shared by vkrt_render_desc and vkrt_trace_desc. */
 static vkrt_result check_tracing(vkrt_context *ctx, vkrt_intersector intersector, vkrt_precision precision,
@@ -335,26 +364,16 @@ vkrt_result vkrt_render(vkrt_context *ctx, vkrt_scene *scene, const vkrt_render_
     double t0 = core_now_ms();
     double trace_ms = 0.0;
     trace_counts counts = { 0 };
-    const bool reads_surfaces = mode == VKRT_MODE_ALBEDO || mode == VKRT_MODE_UV;
-    if (ctx->vk && reads_surfaces &&
-        (r = gpu_scene_upload_surfaces(ctx->vk, &scene->gpu, &(gpu_surface_data){
-                                           scene->surfaces, scene->materials, scene->material_count, scene->textures,
-                                           scene->texture_count ? scene->texture_count : 1, scene->texels,
-                                           scene->texel_count ? scene->texel_count : 1 })) != VKRT_OK)
-        return r;
+    if ((r = ensure_surfaces(scene, mode == VKRT_MODE_ALBEDO || mode == VKRT_MODE_UV)) != VKRT_OK) return r;
     if (ctx->vk) {
         gpu_trace_params p = {
             .camera = camera, .mode = mode, .traversal = traversal, .heat = heat, .intersector = d.intersector,
-            .counters = d.traversal_counters, .progress = d.progress, .progress_user = d.progress_user,
+            .counters = d.traversal_counters, .alpha_tested = scene->alpha_tested, .progress = d.progress,
+            .progress_user = d.progress_user,
         };
         r = gpu_trace_render(ctx->vk, &scene->gpu, &p, out_rgba, &trace_ms, &counts);
     } else {
-        cpu_trace_scene s = {
-            .nodes = scene->bvh.nodes, .node_count = scene->bvh.node_count,
-            .tris = scene->tris, .tri_count = scene->bvh.tri_count,
-            .surfaces = scene->surfaces, .materials = scene->materials, .textures = scene->textures,
-            .texels = scene->texels,
-        };
+        cpu_trace_scene s = cpu_scene_of(scene);
         cpu_trace_params p = {
             .camera = camera, .mode = mode, .traversal = traversal, .heat = heat, .intersector = d.intersector,
             .precision = d.precision, .camera_d = camera_d, .counters = d.traversal_counters,
@@ -395,15 +414,12 @@ vkrt_result vkrt_trace_rays(vkrt_context *ctx, vkrt_scene *scene, const vkrt_tra
     vkrt_traversal traversal = d.traversal ? d.traversal : VKRT_TRAVERSAL_BVH;
     if (ctx->vk) {
         gpu_trace_rays_params p = {
-            .traversal = traversal, .intersector = d.intersector,
+            .traversal = traversal, .intersector = d.intersector, .alpha_tested = scene->alpha_tested,
             .progress = d.progress, .progress_user = d.progress_user,
         };
-        r = gpu_trace_rays(ctx->vk, &scene->gpu, &p, rays, count, out_hits);
+        if ((r = ensure_surfaces(scene, false)) == VKRT_OK) r = gpu_trace_rays(ctx->vk, &scene->gpu, &p, rays, count, out_hits);
     } else {
-        cpu_trace_scene s = {
-            .nodes = scene->bvh.nodes, .node_count = scene->bvh.node_count,
-            .tris = scene->tris, .tri_count = scene->bvh.tri_count,
-        };
+        cpu_trace_scene s = cpu_scene_of(scene);
         cpu_trace_rays_params p = {
             .traversal = traversal, .intersector = d.intersector, .precision = d.precision,
             .threads = ctx->cpu_threads, .progress = d.progress, .progress_user = d.progress_user,

@@ -25,6 +25,7 @@ struct vkrt_scene {
     uint32_t texture_count;
     uint32_t *texels;          /* 2 words per texel, every texture's in turn */
     size_t texel_count;
+    bool alpha_tested;         /* some material has alpha_cutoff > 0 */
     gpu_scene gpu;             /* device copies (GPU backend) */
     vkrt_scene_stats stats;
 };

@@ -38,6 +38,33 @@ typedef struct heat_counts {
     uint32_t nodes, leaves, tris;
 } heat_counts;
 
+/* Texture coordinates interpolated with the hit's barycentrics (u: corner 1, v: corner 2).
+ * Mirrors surface_uv() in shaders/trace.comp. */
+static void surface_uv(const vkrt_gpu_surface *f, float u, float v, float out[2])
+{
+    float w = 1.0f - u - v;
+    out[0] = (f->u0 * w + f->u1 * u) + f->u2 * v;
+    out[1] = (f->v0 * w + f->v1 * u) + f->v2 * v;
+}
+
+/* Whether a hit at barycentrics (u, v) on triangle prim is there: its material is opaque, or
+ * its alpha (times the texture's) reaches the cutoff. Mirrors alpha_passes() in
+ * shaders/trace.comp. */
+static bool alpha_passes(const cpu_trace_scene *s, uint32_t prim, float u, float v)
+{
+    const vkrt_gpu_surface *f = &s->surfaces[prim];
+    const vkrt_gpu_material *m = &s->materials[f->material];
+    if (!(m->alpha_cutoff > 0.0f)) return true;
+    float alpha = m->alpha;
+    if (m->base_color_texture != VKRT_NO_TEXTURE) {
+        float uv[2], texel[4];
+        surface_uv(f, u, v, uv);
+        texture_sample(&s->textures[m->base_color_texture], s->texels, uv[0], uv[1], texel);
+        alpha = alpha * texel[3];
+    }
+    return alpha >= m->alpha_cutoff;
+}
+
 #define REAL float
 #define R(name) name##_f
 #define REAL_IS_FLOAT 1
@@ -73,15 +100,6 @@ static float refine_hit_distance(vec3_d origin, vec3_d dir, double tmin, double 
     if (denom == 0.0) return t;
     double refined = v_dot_d(n, v_sub_d(v0, origin)) / denom;
     return refined > tmin && refined < tmax ? (float)refined : t;
-}
-
-/* Texture coordinates interpolated with the hit's barycentrics (u: corner 1, v: corner 2).
- * Mirrors surface_uv() in shaders/trace.comp. */
-static void surface_uv(const vkrt_gpu_surface *f, float u, float v, float out[2])
-{
-    float w = 1.0f - u - v;
-    out[0] = (f->u0 * w + f->u1 * u) + f->u2 * v;
-    out[1] = (f->v0 * w + f->v1 * u) + f->v2 * v;
 }
 
 static void shade(const cpu_trace_scene *s, const cpu_trace_params *p, const hit *best, const heat_counts *heat,

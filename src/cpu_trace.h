@@ -19,6 +19,7 @@ typedef struct cpu_trace_scene {
     const vkrt_gpu_material *materials;
     const vkrt_gpu_texture *textures;
     const uint32_t *texels;
+    bool alpha_tested;                  /* some material is alpha-masked: hits are alpha tested */
 } cpu_trace_scene;
 
 typedef struct cpu_trace_params {

@@ -190,12 +190,16 @@ static inline bool R(hit_closer)(REAL t, uint32_t prim, REAL best_t, uint32_t be
     return t < best_t || (t == best_t && prim < best_prim);
 }
 
-static inline void R(test_triangle)(vkrt_intersector isect, const R(ray) *r, const vkrt_gpu_tri *tris, uint32_t index,
+/* A closer hit of an alpha-tested scene must also pass its material's alpha test (see
+ * alpha_passes in cpu_trace.c; the double reference tests its barycentrics rounded to float). */
+static inline void R(test_triangle)(vkrt_intersector isect, const R(ray) *r, const cpu_trace_scene *s, uint32_t index,
                                     R(hit) *best)
 {
+    const vkrt_gpu_tri *tris = s->tris;
     REAL t, u, v;
     if (R(intersect_triangle)(isect, r, &tris[index], &t, &u, &v) &&
-        R(hit_closer)(t, tris[index].prim_id, best->t, best->prim)) {
+        R(hit_closer)(t, tris[index].prim_id, best->t, best->prim) &&
+        (!s->alpha_tested || alpha_passes(s, tris[index].prim_id, (float)u, (float)v))) {
         best->t = t;
         best->u = u;
         best->v = v;
@@ -251,7 +255,7 @@ static void R(trace_bvh)(const cpu_trace_scene *s, vkrt_intersector isect, const
         if (n->tri_count != 0) {
             for (uint32_t i = n->left_first; i < n->left_first + n->tri_count; i++) {
                 heat->tris++;
-                R(test_triangle)(isect, r, s->tris, i, best);
+                R(test_triangle)(isect, r, s, i, best);
             }
         } else {
             uint32_t left = n->left_first, right = left + 1;
@@ -296,7 +300,7 @@ static void R(trace_bvh)(const cpu_trace_scene *s, vkrt_intersector isect, const
 
 static void R(trace_naive)(const cpu_trace_scene *s, vkrt_intersector isect, const R(ray) *r, R(hit) *best)
 {
-    for (uint32_t i = 0; i < s->tri_count; i++) R(test_triangle)(isect, r, s->tris, i, best);
+    for (uint32_t i = 0; i < s->tri_count; i++) R(test_triangle)(isect, r, s, i, best);
 }
 
 /* Closest hit of one ray with the chosen traversal, as the float hit the shading reads. */

@@ -555,6 +555,7 @@ vkrt_result gpu_trace_render(vk_context *vk, const gpu_scene *scene, const gpu_t
         .budget = naive ? 0 : vk->trace_budget,
         /* Naive traversal's counts are known without tracing: no variant for them. */
         .counters = params->counters && !naive,
+        .alpha = params->alpha_tested,
     };
     /* Only heatmap reads the heat kind: other modes share one pipeline whatever it is. */
     if (variant.mode != VKRT_GPU_MODE_HEATMAP) variant.heat = VKRT_GPU_HEAT_NODES;
@@ -646,6 +647,7 @@ vkrt_result gpu_trace_rays(vk_context *vk, const gpu_scene *scene, const gpu_tra
         .raygen = VKRT_GPU_RAYGEN_BUFFER,
         .isect = gpu_isect(params->intersector),
         .budget = naive ? 0 : vk->trace_budget,
+        .alpha = params->alpha_tested,
     };
     vk_trace_pipeline pipe;
     vkrt_result r = vk_trace_pipeline_get(vk, variant, &pipe);

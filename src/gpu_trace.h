@@ -50,6 +50,7 @@ typedef struct gpu_trace_params {
     vkrt_heat heat;            /* resolved */
     vkrt_intersector intersector; /* _DEFAULT: watertight */
     bool counters;             /* fill *out_counts (a pipeline variant that writes them) */
+    bool alpha_tested;         /* alpha-test every hit (the surfaces must be uploaded) */
     vkrt_progress_fn progress; /* may be NULL */
     void *progress_user;
 } gpu_trace_params;
@@ -63,6 +64,7 @@ vkrt_result gpu_trace_render(vk_context *vk, const gpu_scene *scene, const gpu_t
 typedef struct gpu_trace_rays_params {
     vkrt_traversal traversal;     /* resolved */
     vkrt_intersector intersector; /* _DEFAULT: watertight */
+    bool alpha_tested;            /* as in gpu_trace_params */
     vkrt_progress_fn progress;    /* may be NULL; called between submissions */
     void *progress_user;
 } gpu_trace_rays_params;

@@ -625,6 +625,7 @@ static int command_info(options *o)
     printf("surfaces      %" PRIu64 " bytes (albedo and uv modes only): %u material%s, %u texture%s, %s\n",
            s.surface_bytes, s.materials, s.materials == 1 ? "" : "s", s.textures, s.textures == 1 ? "" : "s",
            s.has_texcoords ? "texture coordinates" : "no texture coordinates");
+    if (s.alpha_tested) printf("alpha mask    some materials: every hit is alpha tested\n");
     printf("bounds        (%g, %g, %g) - (%g, %g, %g)\n", s.bounds_min[0], s.bounds_min[1], s.bounds_min[2],
            s.bounds_max[0], s.bounds_max[1], s.bounds_max[2]);
     printf("leaf sizes   ");

@@ -96,6 +96,7 @@ vkrt_result mesh_add_material(core *c, mesh *m, const vkrt_material *mat, uint32
         { "metallic", &mat->metallic, 1, 1.0f },
         { "roughness", &mat->roughness, 1, 1.0f },
         { "emissive", mat->emissive, 3, INFINITY },
+        { "alpha_cutoff", &mat->alpha_cutoff, 1, 1.0f },
     };
     for (size_t f = 0; f < sizeof fields / sizeof fields[0]; f++)
         for (int i = 0; i < fields[f].count; i++) {

@@ -314,6 +314,8 @@ static vkrt_result primitive_material(gltf_walk *w, const cgltf_primitive *prim,
         mat.metallic = g->pbr_metallic_roughness.metallic_factor;
         mat.roughness = g->pbr_metallic_roughness.roughness_factor;
     }
+    /* MASK cuts at alpha_cutoff (0.5 by default, cgltf's too); BLEND is drawn opaque. */
+    if (g->alpha_mode == cgltf_alpha_mode_mask) mat.alpha_cutoff = g->alpha_cutoff > 0.0f ? g->alpha_cutoff : 1e-6f;
     float strength = g->has_emissive_strength ? g->emissive_strength.emissive_strength : 1.0f;
     for (int i = 0; i < 3; i++) mat.emissive[i] = g->emissive_factor[i] * strength;
     char what[64];

@@ -115,6 +115,7 @@ void scene_pack_surfaces(const mesh *m, vkrt_gpu_surface *surfaces, vkrt_gpu_mat
             .metallic = x->metallic,
             .roughness = x->roughness,
             .base_color_texture = m->material_textures[i],
+            .alpha_cutoff = x->alpha_cutoff,
         };
     }
 }

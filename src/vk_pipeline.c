@@ -7,9 +7,9 @@
 #include "../shaders/vkrt_shared.h"
 #include "shaders_embedded.h"
 
-/* Images: (5 modes + 3 heat kinds) x 2 traversals x 2 intersectors x counters on or off;
- * rays: 2 x 2 more. */
-#define MAX_VARIANTS 96
+/* Images: (5 modes + 3 heat kinds) x 2 traversals x 2 intersectors x counters on or off x
+ * alpha test on or off; rays: 2 x 2 x 2 more. */
+#define MAX_VARIANTS 192
 
 typedef struct vk_pipelines {
     VkShaderModule trace_module;
@@ -187,6 +187,7 @@ vkrt_result vk_trace_pipeline_get(vk_context *vk, vk_trace_variant variant, vk_t
         { VKRT_SPEC_ISECT, offsetof(vk_trace_variant, isect), sizeof(uint32_t) },
         { VKRT_SPEC_BUDGET, offsetof(vk_trace_variant, budget), sizeof(uint32_t) },
         { VKRT_SPEC_COUNTERS, offsetof(vk_trace_variant, counters), sizeof(uint32_t) },
+        { VKRT_SPEC_ALPHA, offsetof(vk_trace_variant, alpha), sizeof(uint32_t) },
     };
     VkSpecializationInfo spec = {
         .mapEntryCount = sizeof entries / sizeof entries[0],

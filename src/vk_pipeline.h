@@ -18,6 +18,7 @@ typedef struct vk_trace_variant {
     uint32_t isect;      /* VKRT_GPU_ISECT_* */
     uint32_t budget;     /* BVH loop iterations per dispatch, 0: unlimited (VKRT_SPEC_BUDGET) */
     uint32_t counters;   /* 1: write each pixel's traversal counts (VKRT_SPEC_COUNTERS) */
+    uint32_t alpha;      /* 1: alpha-test hits (VKRT_SPEC_ALPHA) */
 } vk_trace_variant;
 
 typedef struct vk_trace_pipeline {

@@ -174,6 +174,9 @@ typedef struct vkrt_material {
     const vkrt_texture_desc *base_color_texture; /* NULL (default): none; else its texel at
                                                     the hit's texture coordinates multiplies
                                                     base_color (borrowed for the call) */
+    float alpha_cutoff;  /* 0 (default): opaque, alpha ignored by visibility; in (0, 1]: alpha
+                            MASK (glTF): where alpha (base_color[3] times the texture's) is
+                            below it the surface is not there and rays pass through */
 } vkrt_material;
 
 /* The material of a mesh that names none: grey diffuse (base colour 0.8, alpha 1, metallic
@@ -235,6 +238,8 @@ typedef struct vkrt_scene_stats {
                                       triangles use, and the default where one names none */
     uint32_t textures;             /* base colour textures read */
     bool has_texcoords;            /* some triangle has texture coordinates */
+    bool alpha_tested;             /* some material is alpha-masked: every hit is alpha tested
+                                      (a pipeline variant of its own; others pay nothing) */
     uint64_t surface_bytes;        /* texture coordinates and material per triangle, the
                                       material table and the textures: on the device only once a
                                       render needs them (albedo and uv modes) */

@@ -926,6 +926,75 @@ static void gpu_albedo_and_uv_show_materials_and_texture_coordinates(void)
     }
 }
 
+/* Alpha MASK: a square (z = 0.5) whose 2x2 texture is opaque on one diagonal and clear on the
+ * other, cut at 0.5, in front of an opaque square (z = 0): near each texel centre the `id`
+ * image shows the front square where its texel is opaque and the back one where it is clear,
+ * on both backends, bit for bit alike, BVH = naive; vkrt_trace_rays passes through too. */
+static void gpu_alpha_masked_surfaces_let_rays_through(void)
+{
+    static const float front[12] = { -1, -1, 0.5f, 1, -1, 0.5f, 1, 1, 0.5f, -1, 1, 0.5f };
+    static const float back[12] = { -2, -2, 0, 2, -2, 0, 2, 2, 0, -2, 2, 0 };
+    static const float uv[8] = { 0, 1, 1, 1, 1, 0, 0, 0 }; /* v = 0 at the top (y = 1) */
+    static const uint32_t idx[6] = { 0, 1, 2, 0, 2, 3 };
+    static const uint8_t texels8[16] = { 255, 255, 255, 255, 255, 255, 255, 0, 255, 255, 255, 0, 255, 255, 255, 255 };
+    const vkrt_texture_desc tex = { .rgba8 = texels8, .width = 2, .height = 2, .wrap_u = VKRT_WRAP_CLAMP,
+                                    .wrap_v = VKRT_WRAP_CLAMP };
+    const vkrt_material masked = { .base_color = { 1, 1, 1, 1 }, .roughness = 1, .base_color_texture = &tex,
+                                   .alpha_cutoff = 0.5f };
+    vkrt_mesh_desc md[2] = {
+        { .positions = front, .vertex_count = 4, .indices = idx, .index_count = 6, .texcoords = uv, .material = &masked },
+        { .positions = back, .vertex_count = 4, .indices = idx, .index_count = 6 },
+    };
+    vkrt_scene_desc sd = { .meshes = md, .mesh_count = 2, .keep_world_coordinates = true };
+    vkrt_scene *sg = NULL, *sc = NULL;
+    CHECK(vkrt_scene_create(gpu, &sd, &sg) == VKRT_OK);
+    CHECK(vkrt_scene_create(cpu, &sd, &sc) == VKRT_OK);
+    vkrt_scene_stats st;
+    CHECK(sg && vkrt_scene_stats_get(sg, &st) == VKRT_OK && st.alpha_tested);
+    const uint32_t w = 40, h = 40;
+    vkrt_render_desc d = { .width = w, .height = h, .mode = VKRT_MODE_ID,
+                           .camera = { .eye = { 0, 0, 3 }, .fov_y_degrees = 50 } };
+    float *g = sg ? render(gpu, sg, &d) : NULL, *c = sc ? render(cpu, sc, &d) : NULL;
+    d.traversal = VKRT_TRAVERSAL_NAIVE;
+    float *gn = sg ? render(gpu, sg, &d) : NULL;
+    /* Triangle ids only: on the back square's diagonal (a shared edge) the CPU's exact zero rule
+     * may change the barycentrics by an ulp (Robustness rules), never the triangle. */
+    size_t same_ids = 0;
+    for (size_t i = 0; g && c && i < (size_t)w * h; i++) same_ids += g[4 * i] == c[4 * i];
+    CHECK_MSG(same_ids == (size_t)w * h, "alpha-tested id images: GPU and CPU ids differ on %zu pixels",
+              (size_t)w * h - same_ids);
+    CHECK_MSG(g && gn && memcmp(g, gn, (size_t)w * h * 4 * sizeof *g) == 0, "alpha-tested id images: BVH and naive differ");
+    const double half = tan(25.0 * 3.14159265358979323846 / 180.0);
+    size_t decided = 0, wrong = 0;
+    for (uint32_t y = 0; g && y < h; y++)
+        for (uint32_t x = 0; x < w; x++) {
+            double sx = 2.0 * (x + 0.5) / w - 1.0, sy = 1.0 - 2.0 * (y + 0.5) / h;
+            double fx = 2.5 * sx * half, fy = 2.5 * sy * half; /* where the ray crosses z = 0.5 */
+            double u = (fx + 1) / 2, v = (1 - fy) / 2;
+            if (fabs(fmod(u, 0.5) - 0.25) > 0.1 || fabs(fmod(v, 0.5) - 0.25) > 0.1 || u < 0 || u > 1 || v < 0 || v > 1)
+                continue; /* only near a texel centre is the blended alpha far from the cutoff */
+            decided++;
+            bool opaque = (u < 0.5) == (v < 0.5); /* texels (0, 0) and (1, 1) */
+            float id = g[((size_t)y * w + x) * 4];
+            wrong += opaque ? !(id == 0.0f || id == 1.0f) : !(id == 2.0f || id == 3.0f);
+        }
+    CHECK_MSG(decided > 50 && wrong == 0, "alpha test: %zu of %zu decided pixels wrong", wrong, decided);
+    /* Rays through the centres of a clear and an opaque texel. */
+    vkrt_ray rays[2] = { { .origin = { 0.5f, 0.5f, 2 }, .dir = { 0, 0, -1 } }, { .origin = { -0.5f, 0.5f, 2 }, .dir = { 0, 0, -1 } } };
+    for (int k = 0; sg && sc && k < 2; k++) {
+        vkrt_hit hits[2];
+        CHECK(vkrt_trace_rays(k ? cpu : gpu, k ? sc : sg, &(vkrt_trace_desc){ 0 }, rays, 2, hits) == VKRT_OK);
+        CHECK_MSG(hits[0].prim_id >= 2 && hits[0].t == 2.0f && hits[1].prim_id < 2 && hits[1].t == 1.5f,
+                  "%s rays: prim %u at %g, prim %u at %g", k ? "cpu" : "gpu", hits[0].prim_id, (double)hits[0].t,
+                  hits[1].prim_id, (double)hits[1].t);
+    }
+    free(g);
+    free(c);
+    free(gn);
+    vkrt_scene_destroy(sg);
+    vkrt_scene_destroy(sc);
+}
+
 /* Double precision is the CPU reference's alone: the GPU refuses it with a message saying so. */
 static void gpu_refuses_double_precision(void)
 {
@@ -987,6 +1056,7 @@ int main(void)
     RUN(gpu_image_beyond_the_loop_limit_matches_cpu);
     RUN(gpu_traversal_counters_sum_the_heatmap);
     RUN(gpu_albedo_and_uv_show_materials_and_texture_coordinates);
+    RUN(gpu_alpha_masked_surfaces_let_rays_through);
 
     CHECK_EQ_U64(vkrt_context_validation_messages(gpu), 0);
     vkrt_context_destroy(gpu);
