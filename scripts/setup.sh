@@ -15,6 +15,7 @@ packages=(
   glslang-dev glslang-tools spirv-tools       # run-time GLSL -> SPIR-V, and glslangValidator for the shader test
   libstb-dev libtinyobjloader-dev             # PNG writer and OBJ loader
   dpkg-dev                                    # apt-get source, for cgltf.h
+  clang libclang-rt-14-dev                    # scripts/fuzz: libFuzzer and the sanitizers for clang
 )
 
 missing=()

@@ -164,6 +164,58 @@ static bool accessor_loaded(const cgltf_accessor *a)
     return true;
 }
 
+static size_t component_bytes(cgltf_component_type t)
+{
+    switch (t) {
+    case cgltf_component_type_r_16:
+    case cgltf_component_type_r_16u: return 2;
+    case cgltf_component_type_r_32u:
+    case cgltf_component_type_r_32f: return 4;
+    default: return 1;
+    }
+}
+
+static bool aligned_at(const cgltf_buffer_view *view, cgltf_size offset, size_t bytes)
+{
+    return !view || !view->buffer->data || ((uintptr_t)view->buffer->data + view->offset + offset) % bytes == 0;
+}
+
+/* glTF 2.0 requires every accessor's data (and its stride) aligned to its component size, and
+ * cgltf reads them through typed pointers: a file that breaks the rule (a misplaced offset, or a
+ * GLB whose binary chunk starts unaligned) is refused rather than read misaligned. */
+static bool accessor_aligned(const cgltf_accessor *a)
+{
+    size_t bytes = component_bytes(a->component_type);
+    if (!aligned_at(a->buffer_view, a->offset, bytes) || a->stride % bytes) return false;
+    if (a->is_sparse)
+        return aligned_at(a->sparse.indices_buffer_view, a->sparse.indices_byte_offset,
+                          component_bytes(a->sparse.indices_component_type)) &&
+               aligned_at(a->sparse.values_buffer_view, a->sparse.values_byte_offset, bytes);
+    return true;
+}
+
+/* What cgltf_validate itself reads through typed pointers (primitive indices and sparse
+ * indices, for their bounds) must be aligned before it runs. */
+static vkrt_result check_validated_alignment(core *c, const char *path, const cgltf_data *data)
+{
+    for (cgltf_size i = 0; i < data->accessors_count; i++) {
+        const cgltf_accessor *a = &data->accessors[i];
+        if (a->is_sparse && !aligned_at(a->sparse.indices_buffer_view, a->sparse.indices_byte_offset,
+                                        component_bytes(a->sparse.indices_component_type)))
+            return core_fail(c, VKRT_ERROR_PARSE, "%s: accessor %zu: its sparse indices are not aligned", path, (size_t)i);
+    }
+    for (cgltf_size m = 0; m < data->meshes_count; m++)
+        for (cgltf_size p = 0; p < data->meshes[m].primitives_count; p++) {
+            const cgltf_accessor *indices = data->meshes[m].primitives[p].indices;
+            if (indices && !accessor_aligned(indices))
+                return core_fail(c, VKRT_ERROR_PARSE,
+                                 "%s: mesh %zu primitive %zu: its indices are not aligned to their size (glTF 2.0 "
+                                 "requires it)",
+                                 path, (size_t)m, (size_t)p);
+        }
+    return VKRT_OK;
+}
+
 typedef struct gltf_walk {
     core *c;
     const char *path;
@@ -418,6 +470,9 @@ static vkrt_result append_primitive(gltf_walk *w, const cgltf_primitive *prim, s
             return core_fail(c, meshopt ? VKRT_ERROR_UNSUPPORTED : VKRT_ERROR_PARSE, "%s: %s: %s has no buffer data%s",
                              w->path, what, check_names[i], meshopt ? " (EXT_meshopt_compression is not supported)" : "");
         }
+        if (checks[i] && !accessor_aligned(checks[i]))
+            return core_fail(c, VKRT_ERROR_PARSE, "%s: %s: %s is not aligned to its component size (glTF 2.0 requires it)",
+                             w->path, what, check_names[i]);
     }
     if (prim->indices && prim->indices->is_sparse)
         return core_fail(c, VKRT_ERROR_UNSUPPORTED, "%s: %s: sparse index accessors are not supported", w->path, what);
@@ -809,6 +864,7 @@ vkrt_result mesh_load_gltf(core *c, const char *path, mesh *m)
         r = buffers_failure(c, path, data, cr);
         goto done;
     }
+    if ((r = check_validated_alignment(c, path, data)) != VKRT_OK) goto done;
     if ((cr = cgltf_validate(data)) != cgltf_result_success) {
         if ((r = find_bad_index(c, path, data)) != VKRT_OK) goto done;
         r = cr == cgltf_result_data_too_short

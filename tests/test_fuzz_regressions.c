@@ -1,0 +1,81 @@
+/* Hostile inputs (tests/fuzz/regressions/): files the fuzzers found, or written by hand to
+ * claim absurd sizes, that must load cleanly or fail with an input error naming the file, never
+ * crash, hang or leak (the sanitizer build runs this too). Every file there is loaded; those
+ * listed below must also give their expected outcome. */
+#include <dirent.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "check.h"
+#include "vkrt.h"
+
+#define DIR_PATH VKRT_TEST_SOURCE_DIR "/fuzz/regressions"
+
+static const struct {
+    const char *name;
+    vkrt_result result;
+    uint64_t triangles;  /* when it loads */
+    const char *message; /* when it fails: part of the message */
+} expected[] = {
+    { "huge_accessor_count.gltf", VKRT_ERROR_PARSE, 0, "reaches past the end" },
+    { "offset_past_the_buffer.gltf", VKRT_ERROR_PARSE, 0, "reaches past the end" },
+    { "absurd_stride.gltf", VKRT_ERROR_PARSE, 0, "reaches past the end" },
+    { "face_of_5000_corners.obj", VKRT_OK, 4998, NULL },
+    { "long_line_and_non_utf8.obj", VKRT_OK, 1, NULL },
+    /* Found by fuzz_gltf: a GLB whose TEXCOORD_0 data lies at an odd address (cgltf read it
+     * through a float pointer: undefined behaviour). */
+    { "misaligned_glb_chunk.glb", VKRT_ERROR_PARSE, 0, "not aligned" },
+    /* Found by fuzz_gltf: 16-bit indices at an odd address, read by cgltf_validate itself. */
+    { "misaligned_indices.glb", VKRT_ERROR_PARSE, 0, "indices are not aligned" },
+};
+
+static bool input_error(vkrt_result r)
+{
+    return r == VKRT_ERROR_IO || r == VKRT_ERROR_PARSE || r == VKRT_ERROR_INVALID_GEOMETRY ||
+           r == VKRT_ERROR_EMPTY_SCENE || r == VKRT_ERROR_UNSUPPORTED || r == VKRT_ERROR_LIMIT;
+}
+
+static void every_regression_input_loads_or_fails_cleanly(void)
+{
+    vkrt_context *ctx = NULL;
+    CHECK(vkrt_context_create(&(vkrt_context_desc){ .backend = VKRT_BACKEND_CPU }, &ctx) == VKRT_OK);
+    DIR *d = opendir(DIR_PATH);
+    CHECK_MSG(d != NULL, "cannot open %s", DIR_PATH);
+    size_t files = 0, listed = 0;
+    struct dirent *e;
+    while (ctx && d && (e = readdir(d)) != NULL) {
+        if (e->d_name[0] == '.') continue;
+        char path[1024];
+        snprintf(path, sizeof path, "%s/%s", DIR_PATH, e->d_name);
+        vkrt_scene *s = NULL;
+        vkrt_result r = vkrt_scene_create(ctx, &(vkrt_scene_desc){ .path = path }, &s);
+        files++;
+        CHECK_MSG(r == VKRT_OK || input_error(r), "%s: %s", e->d_name, vkrt_result_string(r));
+        if (r != VKRT_OK) CHECK_MSG(strstr(vkrt_context_last_error(ctx), e->d_name), "%s: message '%s' does not name it",
+                                    e->d_name, vkrt_context_last_error(ctx));
+        vkrt_scene_stats st = { 0 };
+        if (s) vkrt_scene_stats_get(s, &st);
+        for (size_t i = 0; i < sizeof expected / sizeof expected[0]; i++) {
+            if (strcmp(expected[i].name, e->d_name)) continue;
+            listed++;
+            CHECK_MSG(r == expected[i].result, "%s: %s, expected %s", e->d_name, vkrt_result_string(r),
+                      vkrt_result_string(expected[i].result));
+            if (r == VKRT_OK) CHECK_EQ_U64(st.triangles, expected[i].triangles);
+            if (r != VKRT_OK && expected[i].message)
+                CHECK_MSG(strstr(vkrt_context_last_error(ctx), expected[i].message), "%s: '%s'", e->d_name,
+                          vkrt_context_last_error(ctx));
+        }
+        printf("%-40s %s\n", e->d_name, r == VKRT_OK ? "loads" : vkrt_context_last_error(ctx));
+        vkrt_scene_destroy(s);
+    }
+    if (d) closedir(d);
+    CHECK_EQ_U64(listed, sizeof expected / sizeof expected[0]);
+    CHECK(files >= listed);
+    vkrt_context_destroy(ctx);
+}
+
+int main(void)
+{
+    RUN(every_regression_input_loads_or_fails_cleanly);
+    return check_exit();
+}
