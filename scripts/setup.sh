@@ -16,6 +16,7 @@ packages=(
   libstb-dev libtinyobjloader-dev             # PNG writer and OBJ loader
   dpkg-dev                                    # apt-get source, for cgltf.h
   clang libclang-rt-14-dev                    # scripts/fuzz: libFuzzer and the sanitizers for clang
+  valgrind                                    # test_valgrind: memcheck on CPU-backend runs
 )
 
 missing=()
