@@ -148,6 +148,8 @@ static void fill_stats(vkrt_scene *s, const mesh *m, double load_ms)
     st->surface_bytes = (uint64_t)m->tri_count * sizeof(vkrt_gpu_surface) +
                         (uint64_t)m->material_count * sizeof(vkrt_gpu_material) +
                         (uint64_t)m->texture_count * sizeof(vkrt_gpu_texture) + (uint64_t)scene_texel_count(m) * 8u;
+    st->host_bytes = st->node_bytes + st->triangle_bytes + (uint64_t)s->bvh.tri_count * sizeof(uint32_t) +
+                     st->surface_bytes;
 }
 
 /* The caller's arrays go through the same validation, normal generation and transform as a

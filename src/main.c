@@ -626,6 +626,11 @@ static int command_info(options *o)
            s.surface_bytes, s.materials, s.materials == 1 ? "" : "s", s.textures, s.textures == 1 ? "" : "s",
            s.has_texcoords ? "texture coordinates" : "no texture coordinates");
     if (s.alpha_tested) printf("alpha mask    some materials: every hit is alpha tested\n");
+    double per_tri = s.triangles ? 1.0 / (double)s.triangles : 0.0;
+    printf("memory        host %.1f bytes per triangle; device (GPU backend) %.1f, %.1f more once a mode reads "
+           "the surfaces\n",
+           (double)s.host_bytes * per_tri, (double)(s.node_bytes + s.triangle_bytes) * per_tri,
+           (double)s.surface_bytes * per_tri);
     printf("bounds        (%g, %g, %g) - (%g, %g, %g)\n", s.bounds_min[0], s.bounds_min[1], s.bounds_min[2],
            s.bounds_max[0], s.bounds_max[1], s.bounds_max[2]);
     printf("leaf sizes   ");

@@ -243,6 +243,8 @@ typedef struct vkrt_scene_stats {
     uint64_t surface_bytes;        /* texture coordinates and material per triangle, the
                                       material table and the textures: on the device only once a
                                       render needs them (albedo and uv modes) */
+    uint64_t host_bytes;           /* what the scene holds in host memory: nodes, triangles,
+                                      their BVH order and the surfaces, on either backend */
 } vkrt_scene_stats;
 
 vkrt_result vkrt_scene_stats_get(const vkrt_scene *scene, vkrt_scene_stats *out_stats);

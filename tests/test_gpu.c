@@ -910,6 +910,7 @@ static void gpu_albedo_and_uv_show_materials_and_texture_coordinates(void)
         vkrt_scene_stats st;
         CHECK(sg && vkrt_scene_stats_get(sg, &st) == VKRT_OK);
         if (f == 2) CHECK_MSG(st.materials == 4 && st.has_texcoords, "built-in scene: %u materials", st.materials);
+        CHECK(st.host_bytes >= st.node_bytes + st.triangle_bytes + st.surface_bytes + 4 * st.triangles);
         d = (vkrt_render_desc){ .width = 40, .height = 40 };
         for (int mode = 0; sg && sc && mode < 2; mode++) {
             d.mode = mode ? VKRT_MODE_UV : VKRT_MODE_ALBEDO;
