@@ -58,9 +58,10 @@ vkrt_result mesh_add_texture(core *c, mesh *m, const vkrt_texture_desc *desc, vk
                              const char *what, uint32_t *out_index)
 {
     if (!desc->rgba8) return core_fail(c, invalid, "%s: %s: texture without pixels", source, what);
-    if (desc->width == 0 || desc->height == 0 || desc->width > TEXTURE_MAX_SIDE || desc->height > TEXTURE_MAX_SIDE)
-        return core_fail(c, invalid, "%s: %s: texture of %ux%u texels (each side 1 to %u)", source, what, desc->width,
-                         desc->height, TEXTURE_MAX_SIDE);
+    if (desc->width == 0 || desc->height == 0 || desc->width > TEXTURE_MAX_SIDE || desc->height > TEXTURE_MAX_SIDE ||
+        (uint64_t)desc->width * desc->height > TEXTURE_MAX_TEXELS)
+        return core_fail(c, invalid, "%s: %s: texture of %ux%u texels (each side 1 to %u, at most %u in all)", source,
+                         what, desc->width, desc->height, TEXTURE_MAX_SIDE, TEXTURE_MAX_TEXELS);
     if ((unsigned)desc->wrap_u > VKRT_WRAP_MIRROR || (unsigned)desc->wrap_v > VKRT_WRAP_MIRROR)
         return core_fail(c, invalid, "%s: %s: texture wrap mode has no valid value", source, what);
     if (m->texture_count == m->texture_capacity) {

@@ -31,6 +31,14 @@ vkrt_result mesh_add_texture_image(core *c, mesh *m, const void *bytes, size_t s
     *out_index = VKRT_NO_TEXTURE;
     stb_image_glue_allocator allocator = { glue_alloc, glue_free, c };
     uint32_t width = 0, height = 0;
+    if (stb_image_glue_info(&allocator, bytes, size, &width, &height) &&
+        (width > TEXTURE_MAX_SIDE || height > TEXTURE_MAX_SIDE || (uint64_t)width * height > TEXTURE_MAX_TEXELS)) {
+        char reason_text[96];
+        snprintf(reason_text, sizeof reason_text, "%ux%u texels, more than %u on a side or %u in all", width, height,
+                 TEXTURE_MAX_SIDE, TEXTURE_MAX_TEXELS);
+        unreadable(c, source, what, name, reason_text);
+        return VKRT_OK;
+    }
     const char *reason = NULL;
     uint8_t *pixels = stb_image_glue_decode_rgba8(&allocator, bytes, size, &width, &height, &reason);
     if (!pixels) {
@@ -41,8 +49,8 @@ vkrt_result mesh_add_texture_image(core *c, mesh *m, const void *bytes, size_t s
         return VKRT_OK;
     }
     vkrt_result r = VKRT_OK;
-    if (width > TEXTURE_MAX_SIDE || height > TEXTURE_MAX_SIDE) {
-        unreadable(c, source, what, name, "larger than 16384 texels on a side");
+    if (width > TEXTURE_MAX_SIDE || height > TEXTURE_MAX_SIDE || (uint64_t)width * height > TEXTURE_MAX_TEXELS) {
+        unreadable(c, source, what, name, "more texels than vkrt's limit");
     } else {
         const vkrt_texture_desc desc = { .rgba8 = pixels, .width = width, .height = height, .wrap_u = wrap_u,
                                          .wrap_v = wrap_v };

@@ -8,8 +8,11 @@
 
 #include "../shaders/vkrt_shared.h"
 
-/* Largest texture side accepted. */
+/* Largest texture side, and most texels, accepted: 4096 x 4096 texels are 128 MiB as halves,
+ * lavapipe's whole storage buffer range; an image file declaring more is not decoded at all,
+ * so a small file cannot make vkrt decode gigabytes. */
 #define TEXTURE_MAX_SIDE 16384u
+#define TEXTURE_MAX_TEXELS (4096u * 4096u)
 
 /* IEEE half from float, rounding to nearest even (overflow to infinity). */
 uint16_t half_from_float(float f);

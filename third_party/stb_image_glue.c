@@ -65,6 +65,21 @@ uint8_t *stb_image_glue_decode_rgba8(const stb_image_glue_allocator *allocator, 
     return pixels;
 }
 
+int stb_image_glue_info(const stb_image_glue_allocator *allocator, const void *bytes, size_t size,
+                        uint32_t *out_width, uint32_t *out_height)
+{
+    int w = 0, h = 0, channels = 0;
+    *out_width = *out_height = 0;
+    if (size > 0x7FFFFFFF) return 0;
+    current = allocator;
+    int ok = stbi_info_from_memory(bytes, (int)size, &w, &h, &channels);
+    current = NULL;
+    if (!ok) return 0;
+    *out_width = (uint32_t)w;
+    *out_height = (uint32_t)h;
+    return 1;
+}
+
 void stb_image_glue_free(const stb_image_glue_allocator *allocator, uint8_t *pixels)
 {
     if (!pixels) return;

@@ -23,6 +23,11 @@ uint8_t *stb_image_glue_decode_rgba8(const stb_image_glue_allocator *allocator, 
                                      uint32_t *out_width, uint32_t *out_height, const char **reason);
 void stb_image_glue_free(const stb_image_glue_allocator *allocator, uint8_t *pixels);
 
+/* The size an image declares, read from its header without decoding its pixels (a JPEG's header
+ * still needs a little memory, from `allocator`); 0 when it is no image stb_image reads. */
+int stb_image_glue_info(const stb_image_glue_allocator *allocator, const void *bytes, size_t size,
+                        uint32_t *out_width, uint32_t *out_height);
+
 #ifdef __cplusplus
 }
 #endif
