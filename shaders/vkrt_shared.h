@@ -42,6 +42,7 @@ typedef struct vkrt_float3 { float x, y, z; } vkrt_float3;
 #define VKRT_BINDING_MATERIALS 10      /* vkrt_gpu_material table (albedo) */
 #define VKRT_BINDING_TEXTURES 11       /* vkrt_gpu_texture table (albedo) */
 #define VKRT_BINDING_TEXELS 12         /* every texture's texels: linear RGBA as 4 halves (uvec2) */
+#define VKRT_BINDING_COUNT 13          /* bindings 0 .. 12: the image one, storage buffers the rest */
 
 /* Specialization constant ids: features a render does not use are compiled out instead of
  * branched over (lavapipe pays nearly full price for an `if` that is false everywhere). */

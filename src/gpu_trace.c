@@ -41,18 +41,13 @@ vkrt_result gpu_scene_upload(vk_context *vk, const vkrt_gpu_node *nodes, uint32_
     if ((r = vk_buffer_upload(vk, &out->nodes, nodes, node_bytes)) != VKRT_OK) goto fail;
     if ((r = vk_buffer_upload(vk, &out->tris, tris, tri_bytes)) != VKRT_OK) goto fail;
     /* Every binding needs a buffer; these stand in until a mode reads surfaces. */
-    if ((r = vk_buffer_create(vk, sizeof(vkrt_gpu_surface), usage, VK_MEMORY_DEVICE, "vkrt surfaces (placeholder)",
-                              &out->surfaces)) != VKRT_OK)
-        goto fail;
-    if ((r = vk_buffer_create(vk, sizeof(vkrt_gpu_material), usage, VK_MEMORY_DEVICE, "vkrt materials (placeholder)",
-                              &out->materials)) != VKRT_OK)
-        goto fail;
-    if ((r = vk_buffer_create(vk, sizeof(vkrt_gpu_texture), usage, VK_MEMORY_DEVICE, "vkrt textures (placeholder)",
-                              &out->textures)) != VKRT_OK)
-        goto fail;
-    if ((r = vk_buffer_create(vk, 2 * sizeof(uint32_t), usage, VK_MEMORY_DEVICE, "vkrt texels (placeholder)",
-                              &out->texels)) != VKRT_OK)
-        goto fail;
+    vk_buffer *placeholders[4] = { &out->surfaces, &out->materials, &out->textures, &out->texels };
+    const VkDeviceSize placeholder_bytes[4] = { sizeof(vkrt_gpu_surface), sizeof(vkrt_gpu_material),
+                                                sizeof(vkrt_gpu_texture), 2 * sizeof(uint32_t) };
+    for (int i = 0; i < 4; i++)
+        if ((r = vk_buffer_create(vk, placeholder_bytes[i], usage, VK_MEMORY_DEVICE, "vkrt surfaces (placeholder)",
+                                  placeholders[i])) != VKRT_OK)
+            goto fail;
     out->node_count = node_count;
     out->tri_count = tri_count;
     return VKRT_OK;
@@ -191,7 +186,7 @@ static vkrt_result create_descriptors(vk_context *vk, const gpu_scene *scene, Vk
                                       render_objects *o)
 {
     VkDescriptorPoolSize sizes[] = {
-        { VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 12 }, /* every binding but the image */
+        { VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, VKRT_BINDING_COUNT - 1 }, /* every binding but the image */
         { VK_DESCRIPTOR_TYPE_STORAGE_IMAGE, 1 },
     };
     VkDescriptorPoolCreateInfo pool_info = {
@@ -223,6 +218,7 @@ static vkrt_result create_descriptors(vk_context *vk, const gpu_scene *scene, Vk
         { VKRT_BINDING_TEXTURES, scene->textures.buffer },    { VKRT_BINDING_TEXELS, scene->texels.buffer },
     };
     enum { BUFFERS = sizeof buffers / sizeof buffers[0] };
+    _Static_assert(BUFFERS == VKRT_BINDING_COUNT - 1, "every binding but the image has a buffer here");
     VkDescriptorBufferInfo infos[BUFFERS];
     VkWriteDescriptorSet writes[BUFFERS + 1];
     for (uint32_t i = 0; i < BUFFERS; i++) {

@@ -230,9 +230,9 @@ typedef struct gltf_walk {
     const cgltf_options *options;
 } gltf_walk;
 
-/* The bytes of a glTF image: its buffer view, a base64 data: URI, or a file beside the glTF
- * (URI percent-decoded). *owned tells the caller to free them. NULL with *reason on failure,
- * and *out_of_memory set when that was the cause. */
+/* The bytes of a glTF image held in the file itself: its buffer view or a base64 data: URI.
+ * *owned tells the caller to free them. NULL with *reason otherwise (an image in a file of its
+ * own included), and *out_of_memory set when that was the cause. */
 static const uint8_t *image_bytes(gltf_walk *w, const cgltf_image *image, size_t *size, bool *owned,
                                   const char **reason, bool *out_of_memory)
 {
@@ -271,41 +271,8 @@ static const uint8_t *image_bytes(gltf_walk *w, const cgltf_image *image, size_t
         *owned = true;
         return out;
     }
-    const char *slash = strrchr(w->path, '/');
-    size_t dir = slash ? (size_t)(slash - w->path) + 1 : 0, n = dir + strlen(image->uri) + 1;
-    char *file = core_alloc(w->c, n);
-    if (!file) {
-        *out_of_memory = true;
-        return NULL;
-    }
-    memcpy(file, w->path, dir);
-    strcpy(file + dir, image->uri);
-    cgltf_decode_uri(file + dir);
-    FILE *f = fopen(file, "rb");
-    core_free(w->c, file);
-    if (!f) {
-        *reason = "the file cannot be opened";
-        return NULL;
-    }
-    long length = -1;
-    uint8_t *bytes = NULL;
-    if (fseek(f, 0, SEEK_END) == 0) length = ftell(f);
-    if (length > 0 && fseek(f, 0, SEEK_SET) == 0) {
-        bytes = core_alloc(w->c, (size_t)length);
-        *out_of_memory = !bytes;
-        if (bytes && fread(bytes, 1, (size_t)length, f) != (size_t)length) {
-            core_free(w->c, bytes);
-            bytes = NULL;
-        }
-    }
-    fclose(f);
-    if (!bytes) {
-        *reason = "the file cannot be read";
-        return NULL;
-    }
-    *owned = true;
-    *size = (size_t)length;
-    return bytes;
+    *reason = "it is a file"; /* texture_of reads those with mesh_add_texture_file */
+    return NULL;
 }
 
 static vkrt_wrap gltf_wrap(cgltf_int mode)
@@ -324,23 +291,38 @@ static vkrt_result texture_of(gltf_walk *w, const cgltf_texture *t, const char *
         return VKRT_OK;
     }
     w->textures[k] = UINT32_MAX;
-    const char *reason = "it has no image";
-    const char *name = t->image && t->image->uri && strncmp(t->image->uri, "data:", 5) ? t->image->uri : "(embedded)";
-    size_t size = 0;
-    bool owned = false, out_of_memory = false;
-    const uint8_t *bytes = t->image ? image_bytes(w, t->image, &size, &owned, &reason, &out_of_memory) : NULL;
-    if (out_of_memory)
-        return core_fail(w->c, VKRT_ERROR_OUT_OF_MEMORY, "%s: %s: out of memory reading texture %s", w->path, what, name);
-    if (!bytes) {
-        core_log(w->c, VKRT_LOG_WARN, "%s: %s: texture %s cannot be read (%s); the material has no texture", w->path,
-                 what, name, reason);
-        return VKRT_OK;
-    }
     vkrt_wrap wrap_u = t->sampler ? gltf_wrap(t->sampler->wrap_s) : VKRT_WRAP_REPEAT;
     vkrt_wrap wrap_v = t->sampler ? gltf_wrap(t->sampler->wrap_t) : VKRT_WRAP_REPEAT;
     uint32_t index;
-    vkrt_result r = mesh_add_texture_image(w->c, w->m, bytes, size, wrap_u, wrap_v, name, w->path, what, &index);
-    if (owned) core_free(w->c, (void *)bytes);
+    vkrt_result r;
+    const cgltf_image *image = t->image;
+    if (image && !image->buffer_view && image->uri && strncmp(image->uri, "data:", 5)) {
+        /* A file beside the glTF, its URI percent-decoded. */
+        const char *slash = strrchr(w->path, '/');
+        size_t dir = slash ? (size_t)(slash - w->path) + 1 : 0, n = dir + strlen(image->uri) + 1;
+        char *file = core_alloc(w->c, n);
+        if (!file) return core_fail(w->c, VKRT_ERROR_OUT_OF_MEMORY, "%s: %s: out of memory", w->path, what);
+        memcpy(file, w->path, dir);
+        strcpy(file + dir, image->uri);
+        cgltf_decode_uri(file + dir);
+        r = mesh_add_texture_file(w->c, w->m, file, wrap_u, wrap_v, w->path, what, &index);
+        core_free(w->c, file);
+    } else {
+        const char *reason = "it has no image";
+        size_t size = 0;
+        bool owned = false, out_of_memory = false;
+        const uint8_t *bytes = image ? image_bytes(w, image, &size, &owned, &reason, &out_of_memory) : NULL;
+        if (out_of_memory)
+            return core_fail(w->c, VKRT_ERROR_OUT_OF_MEMORY, "%s: %s: out of memory reading an embedded texture", w->path,
+                             what);
+        if (!bytes) {
+            core_log(w->c, VKRT_LOG_WARN, "%s: %s: texture (embedded) cannot be read (%s); the material has no texture",
+                     w->path, what, reason);
+            return VKRT_OK;
+        }
+        r = mesh_add_texture_image(w->c, w->m, bytes, size, wrap_u, wrap_v, "(embedded)", w->path, what, &index);
+        if (owned) core_free(w->c, (void *)bytes);
+    }
     if (r != VKRT_OK || index == VKRT_NO_TEXTURE) return r;
     w->textures[k] = index + 1;
     *out = index;
