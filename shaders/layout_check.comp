@@ -17,6 +17,10 @@ layout(std430, set = 0, binding = 7) readonly buffer Counters { vkrt_gpu_counter
 layout(std430, set = 0, binding = 8) readonly buffer Surfaces { vkrt_gpu_surface surfaces[]; };
 layout(std430, set = 0, binding = 9) readonly buffer Materials { vkrt_gpu_material materials[]; };
 layout(std430, set = 0, binding = 10) readonly buffer Textures { vkrt_gpu_texture textures[]; };
+layout(std430, set = 0, binding = 11) readonly buffer Lights { vkrt_gpu_light lights[]; };
+layout(std430, set = 0, binding = 12) readonly buffer Lighting { vkrt_gpu_lighting lightings[]; };
+layout(std430, set = 0, binding = 13) readonly buffer Paths { vkrt_gpu_path paths[]; };
+layout(std430, set = 0, binding = 14) readonly buffer Accums { vkrt_gpu_accum accums[]; };
 layout(push_constant) uniform PushBlock { vkrt_gpu_push p; };
 
 uint k = 0;
@@ -37,7 +41,7 @@ void main()
     put(r.origin); put(r.tmin); put(r.dir); put(r.tmax);
     put(p.eye); put(p.width); put(p.right); put(p.height); put(p.up); put(p.tile_x); put(p.forward);
     put(p.tile_y); put(p.tile_width); put(p.tile_height); put(p.tri_first); put(p.tri_end); put(p.tri_total);
-    put(p.last_chunk); put(p.resume); put(p.pad1);
+    put(p.last_chunk); put(p.resume); put(p.stage_arg);
     vkrt_gpu_resume s = states[1];
     put(s.unfinished); put(s.node); put(s.tri_next); put(s.tri_end); put(s.sp); put(s.t); put(s.u); put(s.v);
     put(s.tri); put(s.prim); put(s.heat_nodes); put(s.heat_leaves); put(s.heat_tris); put(s.pad0); put(s.pad1);
@@ -50,7 +54,19 @@ void main()
     put(f.u0); put(f.v0); put(f.u1); put(f.v1); put(f.u2); put(f.v2); put(f.material); put(f.pad0);
     vkrt_gpu_material m = materials[1];
     put(m.base_color); put(m.alpha); put(m.emissive); put(m.metallic); put(m.roughness); put(m.base_color_texture);
-    put(m.alpha_cutoff); put(m.pad2);
+    put(m.alpha_cutoff); put(m.metallic_roughness_texture); put(m.emissive_texture); put(m.pad0); put(m.pad1);
+    put(m.pad2);
     vkrt_gpu_texture x = textures[1];
     put(x.first); put(x.width); put(x.height); put(x.wrap);
+    vkrt_gpu_light l = lights[1];
+    put(l.vector); put(l.type); put(l.color); put(l.cdf); put(l.tri); put(l.pick); put(l.area); put(l.pad0);
+    vkrt_gpu_lighting g = lightings[1];
+    put(g.sky_zenith); put(g.light_count); put(g.sky_horizon); put(g.punctual_count); put(g.ao_distance);
+    put(g.ao_samples); put(g.max_bounces); put(g.target_error);
+    vkrt_gpu_path q = paths[1];
+    put(q.throughput); put(q.flags); put(q.radiance); put(q.bsdf_pdf); put(q.position); put(q.depth); put(q.normal);
+    put(q.tri); put(q.geo_normal); put(q.metallic); put(q.albedo); put(q.roughness); put(q.wo); put(q.pad0);
+    put(q.pending); put(q.rng_dim);
+    vkrt_gpu_accum a = accums[1];
+    put(a.sum); put(a.samples); put(a.lum_sum); put(a.lum_sq_sum); put(a.done); put(a.alpha);
 }

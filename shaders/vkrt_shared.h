@@ -44,6 +44,24 @@ typedef struct vkrt_float3 { float x, y, z; } vkrt_float3;
 #define VKRT_BINDING_TEXELS 12         /* every texture's texels: linear RGBA as 4 halves (uvec2) */
 #define VKRT_BINDING_COUNT 13          /* bindings 0 .. 12: the image one, storage buffers the rest */
 
+/* Descriptor bindings of shade.comp (set 0): the lighting modes' wavefront stages. The ray and
+ * hit buffers are the ones trace.comp reads and writes in its wavefront variant. */
+#define VKRT_SHADE_BINDING_TRIS 0
+#define VKRT_SHADE_BINDING_SURFACES 1
+#define VKRT_SHADE_BINDING_MATERIALS 2
+#define VKRT_SHADE_BINDING_TEXTURES 3
+#define VKRT_SHADE_BINDING_TEXELS 4
+#define VKRT_SHADE_BINDING_LIGHTS 5      /* vkrt_gpu_light table, then the sky (vkrt_gpu_lighting) */
+#define VKRT_SHADE_BINDING_PATHS 6       /* vkrt_gpu_path per pixel of a tile */
+#define VKRT_SHADE_BINDING_ACCUM 7       /* vkrt_gpu_accum per pixel of a tile */
+#define VKRT_SHADE_BINDING_RAYS 8        /* extension rays, traced closest-hit */
+#define VKRT_SHADE_BINDING_HITS 9        /* their hits (tri = triangle array index) */
+#define VKRT_SHADE_BINDING_SHADOW_RAYS 10 /* shadow and AO rays, traced any-hit */
+#define VKRT_SHADE_BINDING_SHADOW_HITS 11
+#define VKRT_SHADE_BINDING_IMAGE 12      /* the tile's mean radiance */
+#define VKRT_SHADE_BINDING_ACTIVE 13     /* one uint: paths still going after a stage */
+#define VKRT_SHADE_BINDING_COUNT 14
+
 /* Specialization constant ids: features a render does not use are compiled out instead of
  * branched over (lavapipe pays nearly full price for an `if` that is false everywhere). */
 #define VKRT_SPEC_MODE 0
@@ -54,6 +72,13 @@ typedef struct vkrt_float3 { float x, y, z; } vkrt_float3;
 #define VKRT_SPEC_BUDGET 5 /* BVH loop iterations per dispatch; 0 = unlimited (no budget code) */
 #define VKRT_SPEC_COUNTERS 6 /* 1: each pixel's traversal counts written out; 0: no counting code */
 #define VKRT_SPEC_ALPHA 7 /* 1: the scene has alpha-masked materials, hits are alpha tested */
+#define VKRT_SPEC_ANYHIT 8 /* 1: stop at the first hit in (tmin, tmax) (shadow and AO rays) */
+
+/* Specialization constants of shade.comp: the stage, the mode, and one switch per feature, so
+ * a scene pays only for what it uses (vkrt_render_stats.features lists those compiled in). */
+#define VKRT_SPEC_SHADE_STAGE 0
+#define VKRT_SPEC_SHADE_MODE 1
+#define VKRT_SPEC_SHADE_FEATURES 2 /* VKRT_FEATURE_* bits */
 
 /* Values of the specialization constants; the C side asserts they equal the public enums. */
 #define VKRT_GPU_MODE_NORMAL 1
@@ -62,6 +87,9 @@ typedef struct vkrt_float3 { float x, y, z; } vkrt_float3;
 #define VKRT_GPU_MODE_ID 4
 #define VKRT_GPU_MODE_ALBEDO 5
 #define VKRT_GPU_MODE_UV 6
+#define VKRT_GPU_MODE_SHADED 7
+#define VKRT_GPU_MODE_AO 8
+#define VKRT_GPU_MODE_PATH 9
 #define VKRT_GPU_TRAVERSAL_BVH 1
 #define VKRT_GPU_TRAVERSAL_NAIVE 2
 #define VKRT_GPU_HEAT_NODES 1
@@ -69,6 +97,8 @@ typedef struct vkrt_float3 { float x, y, z; } vkrt_float3;
 #define VKRT_GPU_HEAT_TRIS 3
 #define VKRT_GPU_RAYGEN_CAMERA 1 /* one primary ray per pixel of a tile, into the image */
 #define VKRT_GPU_RAYGEN_BUFFER 2 /* the rays of the rays buffer, closest hits into the hits buffer */
+#define VKRT_GPU_RAYGEN_WAVEFRONT 3 /* as BUFFER, but the hit names the triangle array index (for
+                                       shade.comp) and the distance is not refined */
 #define VKRT_GPU_ISECT_WATERTIGHT 1
 #define VKRT_GPU_ISECT_MOLLER_TRUMBORE 2
 
@@ -117,6 +147,32 @@ typedef struct vkrt_float3 { float x, y, z; } vkrt_float3;
  * state plus VKRT_TRAVERSAL_STACK_SIZE 8-byte entries per ray, 36 MiB in all) stay well
  * under lavapipe's 128 MiB maxStorageBufferRange. A 256x256 tile has as many pixels. */
 #define VKRT_RESUME_RAY_CHUNK 65536u
+
+/* Stages of shade.comp, in the order one sample of a tile runs them (vkrt_gpu_push.stage_arg
+ * carries the light or AO ray index of VKRT_STAGE_SHADOW). */
+#define VKRT_STAGE_CAMERA 1  /* primary rays of the pixels still sampling */
+#define VKRT_STAGE_HIT 2     /* closest hits: emission, the sky on a miss, the vertex stored */
+#define VKRT_STAGE_SHADOW 3  /* one shadow or AO ray from the stored vertex */
+#define VKRT_STAGE_BOUNCE 4  /* path: the next direction sampled from the BSDF */
+#define VKRT_STAGE_FINISH 5  /* the last shadow ray resolved, the sample accumulated */
+#define VKRT_STAGE_OUTPUT 6  /* the tile's mean written to the image */
+
+/* Features of the lighting modes, each compiled into shade.comp only when the scene and the
+ * render use it (the same bits as VKRT_FEATURE_* in vkrt.h). */
+#define VKRT_GPU_FEATURE_TEXTURES 1u   /* some material has a texture: uv interpolation, sampling */
+#define VKRT_GPU_FEATURE_PUNCTUAL 2u   /* point or directional lights: shadow rays to them */
+#define VKRT_GPU_FEATURE_EMITTERS 4u   /* emissive triangles: emission, area-light sampling */
+#define VKRT_GPU_FEATURE_SKY 8u        /* a sky that is not black */
+#define VKRT_GPU_FEATURE_SPECULAR 16u  /* some material is metallic: GGX and mirror code */
+#define VKRT_GPU_FEATURE_RANDOM 32u    /* the render needs random numbers (not shaded with only
+                                          punctual lights) */
+#define VKRT_GPU_FEATURE_ADAPTIVE 64u  /* adaptive sampling: per-pixel error estimates */
+#define VKRT_GPU_FEATURE_ALL 127u
+
+/* Light types (vkrt_gpu_light.type). */
+#define VKRT_GPU_LIGHT_DIRECTIONAL 0u
+#define VKRT_GPU_LIGHT_POINT 1u
+#define VKRT_GPU_LIGHT_TRIANGLE 2u
 
 /* Miss value written to the id and depth channels. */
 #define VKRT_MISS (-1.0)
@@ -201,7 +257,7 @@ VKRT_STRUCT(vkrt_gpu_surface) {
     VKRT_UINT pad0;        /* offset 28 */
 };
 
-/* A material (vkrt_material), 48 bytes. */
+/* A material (vkrt_material), 64 bytes. */
 VKRT_STRUCT(vkrt_gpu_material) {
     VKRT_FLOAT3 base_color; /* offset  0; linear RGB */
     float alpha;            /* offset 12 */
@@ -210,7 +266,12 @@ VKRT_STRUCT(vkrt_gpu_material) {
     float roughness;        /* offset 32 */
     VKRT_UINT base_color_texture; /* offset 36; index into the texture table, VKRT_NO_TEXTURE: none */
     float alpha_cutoff;     /* offset 40; > 0: alpha MASK (vkrt_material.alpha_cutoff) */
-    VKRT_UINT pad2;         /* offset 44 */
+    VKRT_UINT metallic_roughness_texture; /* offset 44; glTF: roughness in G, metallic in B, each
+                                             multiplying its factor; VKRT_NO_TEXTURE: none */
+    VKRT_UINT emissive_texture; /* offset 48; multiplies emissive; VKRT_NO_TEXTURE: none */
+    VKRT_UINT pad0;         /* offset 52 */
+    VKRT_UINT pad1;         /* offset 56 */
+    VKRT_UINT pad2;         /* offset 60 */
 };
 
 #define VKRT_NO_TEXTURE 0xFFFFFFFFu
@@ -225,6 +286,71 @@ VKRT_STRUCT(vkrt_gpu_texture) {
     VKRT_UINT width;       /* offset  4 */
     VKRT_UINT height;      /* offset  8 */
     VKRT_UINT wrap;        /* offset 12; wrap_u | wrap_v << 8 (VKRT_GPU_WRAP_*) */
+};
+
+/* A light of the lighting modes, 48 bytes. The table holds the render's punctual lights, then
+ * the scene's emissive triangles; next-event estimation picks one entry with probability
+ * `pick` (its share of the estimated power, the cumulative sum in `cdf`). */
+VKRT_STRUCT(vkrt_gpu_light) {
+    VKRT_FLOAT3 vector;    /* offset  0; directional: unit direction the light travels; point:
+                              position; triangle: unused */
+    VKRT_UINT type;        /* offset 12; VKRT_GPU_LIGHT_* */
+    VKRT_FLOAT3 color;     /* offset 16; directional: irradiance facing it; point: intensity
+                              (W/sr); triangle: emitted radiance */
+    float cdf;             /* offset 28; sum of `pick` of this entry and all before it */
+    VKRT_UINT tri;         /* offset 32; triangle: its index in the triangle array */
+    float pick;            /* offset 36; probability next-event estimation picks this light */
+    float area;            /* offset 40; triangle: its area */
+    VKRT_UINT pad0;        /* offset 44 */
+};
+
+/* What lights a render besides its light table, 48 bytes, after the table's entries in the
+ * same buffer (read as the first element of a second view). */
+VKRT_STRUCT(vkrt_gpu_lighting) {
+    VKRT_FLOAT3 sky_zenith;  /* offset  0; radiance from straight up (+y) */
+    VKRT_UINT light_count;   /* offset 12; entries in the table */
+    VKRT_FLOAT3 sky_horizon; /* offset 16; radiance at and below the horizon */
+    VKRT_UINT punctual_count;/* offset 28; the first entries: directional and point lights */
+    float ao_distance;       /* offset 32; ao: occluders beyond this distance do not count */
+    VKRT_UINT ao_samples;    /* offset 36; ao: rays per hit per sample */
+    VKRT_UINT max_bounces;   /* offset 40; path: bounces after the primary hit */
+    float target_error;      /* offset 44; adaptive: relative standard error to stop at */
+};
+
+/* The state of one pixel's path between wavefront stages, 128 bytes. */
+VKRT_STRUCT(vkrt_gpu_path) {
+    VKRT_FLOAT3 throughput;  /* offset  0; product of BSDF * cos / pdf so far */
+    VKRT_UINT flags;         /* offset 12; VKRT_PATH_* */
+    VKRT_FLOAT3 radiance;    /* offset 16; this sample's radiance so far */
+    float bsdf_pdf;          /* offset 28; solid-angle pdf of the last bounce (MIS), 0: delta */
+    VKRT_FLOAT3 position;    /* offset 32; the stored vertex */
+    VKRT_UINT depth;         /* offset 44; vertices so far, the primary hit's is 1 */
+    VKRT_FLOAT3 normal;      /* offset 48; shading normal, facing the incoming ray */
+    VKRT_UINT tri;           /* offset 60; triangle array index of the vertex */
+    VKRT_FLOAT3 geo_normal;  /* offset 64; geometric normal, facing the incoming ray */
+    float metallic;          /* offset 76 */
+    VKRT_FLOAT3 albedo;      /* offset 80; base colour at the vertex */
+    float roughness;         /* offset 92 */
+    VKRT_FLOAT3 wo;          /* offset 96; unit direction back along the incoming ray */
+    float pad0;              /* offset 108 */
+    VKRT_FLOAT3 pending;     /* offset 112; the shadow ray's contribution if it is unoccluded */
+    VKRT_UINT rng_dim;       /* offset 124; next sampler dimension */
+};
+
+#define VKRT_PATH_ACTIVE 1u   /* the path goes on */
+#define VKRT_PATH_VERTEX 2u   /* a vertex is stored (the last ray hit a surface) */
+#define VKRT_PATH_PENDING 4u  /* a shadow ray's contribution waits for its visibility */
+#define VKRT_PATH_PRIMARY_HIT 8u /* the primary ray hit a surface (alpha of the pixel) */
+
+/* One pixel's accumulated samples, 32 bytes: the radiance sum, and the luminance sum and sum
+ * of squares from which adaptive sampling estimates the error of the mean. */
+VKRT_STRUCT(vkrt_gpu_accum) {
+    VKRT_FLOAT3 sum;         /* offset  0 */
+    VKRT_UINT samples;       /* offset 12 */
+    float lum_sum;           /* offset 16 */
+    float lum_sq_sum;        /* offset 20 */
+    VKRT_UINT done;          /* offset 24; 1: the pixel takes no more samples */
+    float alpha;             /* offset 28; 1 when the primary ray hit */
 };
 
 /* One saved traversal stack entry, 8 bytes: a pushed node and the distance its box starts. */
@@ -262,7 +388,8 @@ VKRT_STRUCT(vkrt_gpu_push) {
     VKRT_UINT tri_total;   /* offset 80; triangles in the scene */
     VKRT_UINT last_chunk;  /* offset 84; naive traversal: 1 when this chunk writes the image */
     VKRT_UINT resume;      /* offset 88; BVH with a budget: 1 continues saved traversals */
-    VKRT_UINT pad1;        /* offset 92 */
+    VKRT_UINT stage_arg;   /* offset 92; shade.comp: the sample index (CAMERA), or the light or
+                              AO ray of a SHADOW stage */
 };
 
 #ifdef __STDC_VERSION__
@@ -290,7 +417,14 @@ _Static_assert(offsetof(vkrt_gpu_stack_entry, tnear) == 4, "vkrt_gpu_stack_entry
 _Static_assert(VKRT_NAIVE_CHUNK_TRIS <= VKRT_LAVAPIPE_BUDGET, "a naive chunk's loop must fit lavapipe's loop limit");
 _Static_assert(sizeof(vkrt_gpu_counters) == 16, "vkrt_gpu_counters must match std430");
 _Static_assert(sizeof(vkrt_gpu_surface) == 32, "vkrt_gpu_surface must match std430");
-_Static_assert(sizeof(vkrt_gpu_material) == 48, "vkrt_gpu_material must match std430");
+_Static_assert(sizeof(vkrt_gpu_material) == 64, "vkrt_gpu_material must match std430");
+_Static_assert(offsetof(vkrt_gpu_material, emissive_texture) == 48, "vkrt_gpu_material.emissive_texture must match std430");
+_Static_assert(sizeof(vkrt_gpu_light) == 48, "vkrt_gpu_light must match std430");
+_Static_assert(offsetof(vkrt_gpu_light, color) == 16, "vkrt_gpu_light.color must match std430");
+_Static_assert(sizeof(vkrt_gpu_lighting) == 48, "vkrt_gpu_lighting must match std430");
+_Static_assert(sizeof(vkrt_gpu_path) == 128, "vkrt_gpu_path must match std430");
+_Static_assert(offsetof(vkrt_gpu_path, pending) == 112, "vkrt_gpu_path.pending must match std430");
+_Static_assert(sizeof(vkrt_gpu_accum) == 32, "vkrt_gpu_accum must match std430");
 _Static_assert(sizeof(vkrt_gpu_texture) == 16, "vkrt_gpu_texture must match std430");
 _Static_assert(offsetof(vkrt_gpu_material, emissive) == 16, "vkrt_gpu_material.emissive must match std430");
 _Static_assert(sizeof(vkrt_gpu_push) == 96, "vkrt_gpu_push must match the push-constant range");

@@ -422,6 +422,7 @@ void mesh_destroy(core *c, mesh *m)
     core_free(c, m->material_ids);
     core_free(c, m->materials);
     core_free(c, m->material_textures);
+    core_free(c, m->lights);
     for (uint32_t i = 0; i < m->texture_count; i++) core_free(c, m->textures[i].texels);
     core_free(c, m->textures);
     memset(m, 0, sizeof *m);

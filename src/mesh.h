@@ -44,6 +44,10 @@ typedef struct mesh {
     mesh_texture *textures;
     uint32_t texture_count;
     uint32_t texture_capacity;
+    vkrt_light *lights;      /* the file's punctual lights (glTF KHR_lights_punctual), in the
+                                mesh's coordinates: mesh_normalize moves them with the geometry */
+    uint32_t light_count;
+    uint32_t light_capacity;
 } mesh;
 
 /* One indexed primitive handed to mesh_append_indexed(). */

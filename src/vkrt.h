@@ -258,9 +258,58 @@ typedef enum vkrt_mode {
     VKRT_MODE_HEATMAP,     /* r = boxes entered / leaves entered / triangles tested (vkrt_heat) */
     VKRT_MODE_ID,          /* r = triangle index in the loaded file (exact), -1 on a miss */
     VKRT_MODE_ALBEDO,      /* rgba = the hit material's base colour (linear) and alpha; 0 on a miss */
-    VKRT_MODE_UV           /* rg = texture coordinates interpolated at the hit, b = 0, a = 1 on a
+    VKRT_MODE_UV,          /* rg = texture coordinates interpolated at the hit, b = 0, a = 1 on a
                               hit; 0 on a miss */
+    /* The lighting modes: rgb = linear radiance (the mean of the pixel's samples), a = 1 where
+     * the primary ray hit a surface, 0 where it sees the sky. Primary rays go through the pixel
+     * centre, as in every mode; the samples differ in what happens after the first hit. */
+    VKRT_MODE_SHADED,      /* direct light: emission, every point and directional light with a hard
+                              shadow (an any-hit shadow ray each), one sample of the emissive
+                              triangles per spp, and the sky as unshadowed ambient light */
+    VKRT_MODE_AO,          /* ambient occlusion: the fraction of ao_samples cosine-distributed rays
+                              per sample that meet nothing within ao_distance, in grey */
+    VKRT_MODE_PATH         /* unidirectional path tracing: Lambertian and GGX (metallic) BSDFs,
+                              perfect mirrors, next-event estimation with multiple importance
+                              sampling, Russian roulette */
 } vkrt_mode;
+
+/* A light added by the render (vkrt_render_desc.lights), besides the scene's own (glTF
+ * KHR_lights_punctual lights and emissive triangles). */
+typedef enum vkrt_light_type {
+    VKRT_LIGHT_DIRECTIONAL = 0, /* a light at infinity, like the sun */
+    VKRT_LIGHT_POINT            /* a point; its light falls off with the square of the distance */
+} vkrt_light_type;
+
+typedef struct vkrt_light {
+    vkrt_light_type type;
+    float vector[3]; /* directional: the direction the light travels (need not be unit); point: its
+                        position, in the scene's traced coordinates */
+    float color[3];  /* linear RGB, >= 0. directional: irradiance on a surface facing it; point:
+                        radiant intensity (irradiance at distance 1) */
+} vkrt_light;
+
+/* Radiance arriving from directions no surface blocks: a gradient from `horizon` (directions at
+ * and below the horizon, y <= 0) to `zenith` (straight up, +y), linear in the direction's y; a
+ * constant sky has zenith == horizon. All zero: black. */
+typedef struct vkrt_sky {
+    float zenith[3];
+    float horizon[3];
+} vkrt_sky;
+
+/* Features of the lighting modes (vkrt_render_stats.features): each is compiled into the GPU
+ * pipeline and run on the CPU only when the scene and the render use it. */
+#define VKRT_FEATURE_TEXTURES 1u  /* some material has a texture: uv interpolation and sampling */
+#define VKRT_FEATURE_PUNCTUAL 2u  /* point or directional lights: a shadow ray to each */
+#define VKRT_FEATURE_EMITTERS 4u  /* emissive triangles: emission and area-light sampling */
+#define VKRT_FEATURE_SKY 8u       /* a sky that is not black */
+#define VKRT_FEATURE_SPECULAR 16u /* some material is metallic: the GGX and mirror code */
+#define VKRT_FEATURE_RANDOM 32u   /* random numbers (every lighting render but `shaded` with only
+                                     point and directional lights, which is exact in one sample) */
+#define VKRT_FEATURE_ADAPTIVE 64u /* adaptive sampling (vkrt_render_desc.target_error) */
+#define VKRT_FEATURE_ALL 127u
+
+/* "textures", "punctual lights", ...; "" for anything but one VKRT_FEATURE_* bit. */
+const char *vkrt_feature_name(uint32_t feature);
 
 typedef enum vkrt_traversal {
     VKRT_TRAVERSAL_DEFAULT = 0, /* BVH */
@@ -308,7 +357,30 @@ typedef struct vkrt_render_desc {
     vkrt_precision precision; /* default: float; double needs the CPU backend */
     bool traversal_counters;  /* false (default): none; true: fill the traversal counters of
                                  vkrt_render_stats (the GPU then traces with a pipeline variant
-                                 that writes them out, a little slower) */
+                                 that writes them out, a little slower; primary modes only) */
+    /* The lighting modes (shaded, ao, path); other modes ignore these fields. When no light of
+     * any kind reaches the render (no lights here or in the scene, no emissive triangle, a
+     * black sky), a default rig is used: a directional key light from above the camera's
+     * right shoulder and a dim blue-grey sky. */
+    const vkrt_light *lights; /* borrowed for the call; NULL with light_count 0 (default): none */
+    uint32_t light_count;
+    vkrt_sky sky;             /* all zero (default): black */
+    uint32_t spp;             /* samples per pixel, 0 (default): 1 for shaded and ao, 16 for path;
+                                 at most 65536 */
+    uint32_t ao_samples;      /* ao: rays per hit per sample, 0 (default): 4; at most 256 */
+    float ao_distance;        /* ao: occluders farther than this do not count; 0 (default): 0.5 */
+    uint32_t max_bounces;     /* path: bounces after the primary hit, 0 (default): 8; at most 64 */
+    uint32_t seed;            /* the sampler's scramble seed; the same seed, scene and settings give
+                                 the same image on a backend */
+    float target_error;       /* adaptive sampling: 0 (default): off, every pixel takes spp
+                                 samples; > 0: a pixel stops once the estimated relative standard
+                                 error of its mean luminance is at most this (after at least 8
+                                 samples), or at spp; a pixel that sees the sky stops after one */
+    bool all_features;        /* false (default): the pipeline is specialised to the features the
+                                 scene uses; true: every feature compiled in (for testing that a
+                                 specialisation changes nothing) */
+    float *out_error;         /* NULL (default), or width * height floats (borrowed): each pixel's
+                                 estimated standard error of its mean luminance (lighting modes) */
     vkrt_progress_fn progress;/* NULL (default): none; called between tiles */
     void *progress_user;
 } vkrt_render_desc;
@@ -325,6 +397,15 @@ typedef struct vkrt_render_stats {
     uint64_t nodes_visited;
     uint64_t leaves_visited;
     uint64_t tris_tested;
+    /* Lighting modes: */
+    uint32_t features;        /* VKRT_FEATURE_* bits the render used (compiled in on the GPU) */
+    uint32_t lights;          /* entries of the light table: punctual lights, then emitters */
+    uint64_t samples;         /* samples taken over all pixels (below width * height * spp with
+                                 adaptive sampling) */
+    uint64_t shadow_rays;     /* shadow and AO rays traced (any-hit) */
+    uint64_t bounce_rays;     /* extension rays traced after the primary ones (closest-hit) */
+    bool naive_by_cost;       /* the default traversal chose naive: the scene's SAH cost (C_trav =
+                                 C_isect = 1) was not below its triangle count */
 } vkrt_render_stats;
 
 /* Floats vkrt_render() writes for an image of width x height: 4 per pixel (RGBA), rows top
@@ -359,6 +440,10 @@ typedef struct vkrt_hit {
 
 typedef struct vkrt_trace_desc {
     vkrt_traversal traversal;     /* default: BVH */
+    bool any_hit;                 /* false (default): the closest hit; true: occlusion queries, the
+                                     first hit found in (tmin, tmax), not necessarily the closest
+                                     (its t, prim_id, u, v are those of that hit); fewer nodes are
+                                     visited */
     vkrt_intersector intersector; /* default: watertight */
     vkrt_precision precision;     /* default: float; double needs the CPU backend */
     vkrt_progress_fn progress;    /* NULL (default): none */
@@ -382,7 +467,8 @@ typedef struct vkrt_image_view {
 } vkrt_image_view;
 
 /* Writes an image, the format chosen by the extension: .png (8-bit colour: normals as RGB,
- * depth as grey, ids as distinct colours, heat on a colour ramp), .pfm (the raw 32-bit floats,
+ * depth as grey, ids as distinct colours, heat on a colour ramp, albedo and the lighting modes'
+ * linear radiance clamped to [0, 1] and sRGB-encoded), .pfm (the raw 32-bit floats,
  * RGB, for exact comparisons), .hdr (Radiance RGBE: the raw RGB values with an 8-bit shared
  * mantissa, negatives such as a miss's -1 stored as 0) or .ppm (8-bit, like .png). Any other
  * extension returns VKRT_ERROR_INVALID_ARGUMENT. The file is written to a temporary

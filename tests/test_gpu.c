@@ -245,7 +245,7 @@ static bool create_check_buffers(vk_buffer *buffers, const void *const *data, co
 static bool run_check_shader(const char *name, const char *source, vk_buffer *buffers, uint32_t count,
                              const void *push, uint32_t push_size, uint32_t groups)
 {
-    enum { MAX_BINDINGS = 12 };
+    enum { MAX_BINDINGS = 16 };
     vk_context *vk = gpu->vk;
     VkDescriptorSetLayout set_layout = VK_NULL_HANDLE;
     VkPipelineLayout layout = VK_NULL_HANDLE;
@@ -349,6 +349,10 @@ static void gpu_shared_layouts_match_c(void)
     vkrt_gpu_surface surfaces[2];
     vkrt_gpu_material materials[2];
     vkrt_gpu_texture textures[2];
+    vkrt_gpu_light lights[2];
+    vkrt_gpu_lighting lightings[2];
+    vkrt_gpu_path paths[2];
+    vkrt_gpu_accum accums[2];
     fill_distinct(nodes, sizeof nodes, 100.0f);
     fill_distinct(tris, sizeof tris, 200.0f);
     fill_distinct(hits, sizeof hits, 300.0f);
@@ -360,34 +364,44 @@ static void gpu_shared_layouts_match_c(void)
     fill_distinct(surfaces, sizeof surfaces, 800.0f);
     fill_distinct(materials, sizeof materials, 900.0f);
     fill_distinct(textures, sizeof textures, 1000.0f);
+    fill_distinct(lights, sizeof lights, 1100.0f);
+    fill_distinct(lightings, sizeof lightings, 1200.0f);
+    fill_distinct(paths, sizeof paths, 1300.0f);
+    fill_distinct(accums, sizeof accums, 1400.0f);
+    enum { PARTS = 15, BUFFERS = 15, MAX_WORDS = 256 };
     /* The order in which layout_check.comp writes the structs out. */
-    const void *parts[] = { &nodes[1],   &tris[1],     &hits[1],     &rays[1],     &push,        &states[1],
-                            &entries[1], &counters[1], &surfaces[1], &materials[1], &textures[1] };
-    const size_t part_sizes[] = { sizeof nodes[1],    sizeof tris[1],      sizeof hits[1],     sizeof rays[1],
-                                  sizeof push,        sizeof states[1],    sizeof entries[1],  sizeof counters[1],
-                                  sizeof surfaces[1], sizeof materials[1], sizeof textures[1] };
-    uint32_t expected[128];
+    const void *parts[PARTS] = { &nodes[1],    &tris[1],      &hits[1],     &rays[1],      &push,
+                                 &states[1],   &entries[1],   &counters[1], &surfaces[1],  &materials[1],
+                                 &textures[1], &lights[1],    &lightings[1], &paths[1],    &accums[1] };
+    const size_t part_sizes[PARTS] = { sizeof nodes[1],    sizeof tris[1],     sizeof hits[1],      sizeof rays[1],
+                                       sizeof push,        sizeof states[1],   sizeof entries[1],   sizeof counters[1],
+                                       sizeof surfaces[1], sizeof materials[1], sizeof textures[1], sizeof lights[1],
+                                       sizeof lightings[1], sizeof paths[1],   sizeof accums[1] };
+    uint32_t expected[MAX_WORDS];
     size_t words = 0;
-    for (int i = 0; i < 11; i++) {
+    for (int i = 0; i < PARTS; i++) {
+        CHECK(words + part_sizes[i] / 4 <= MAX_WORDS);
+        if (words + part_sizes[i] / 4 > MAX_WORDS) return;
         memcpy(expected + words, parts[i], part_sizes[i]);
         words += part_sizes[i] / 4;
     }
-    CHECK(words <= 128);
 
-    /* Bindings 0-2 and 4-10 are inputs; binding 3 receives the words. */
-    vk_buffer buffers[11] = { 0 };
-    const void *data[11] = { nodes, tris, hits, NULL, rays, states, entries, counters, surfaces, materials, textures };
-    const size_t sizes[11] = { sizeof nodes,     sizeof tris,      sizeof hits,     128 * 4,
-                               sizeof rays,      sizeof states,    sizeof entries,  sizeof counters,
-                               sizeof surfaces,  sizeof materials, sizeof textures };
-    bool ok = create_check_buffers(buffers, data, sizes, 11);
-    ok = ok && run_check_shader("layout_check.comp", vkrt_shader_layout_check_comp, buffers, 11, &push, sizeof push, 1);
+    /* Binding 3 receives the words; every other binding is an input. */
+    vk_buffer buffers[BUFFERS] = { 0 };
+    const void *data[BUFFERS] = { nodes,    tris,     hits,   NULL,   rays,   states, entries, counters,
+                                  surfaces, materials, textures, lights, lightings, paths, accums };
+    const size_t sizes[BUFFERS] = { sizeof nodes,     sizeof tris,      sizeof hits,     MAX_WORDS * 4,
+                                    sizeof rays,      sizeof states,    sizeof entries,  sizeof counters,
+                                    sizeof surfaces,  sizeof materials, sizeof textures, sizeof lights,
+                                    sizeof lightings, sizeof paths,     sizeof accums };
+    bool ok = create_check_buffers(buffers, data, sizes, BUFFERS);
+    ok = ok && run_check_shader("layout_check.comp", vkrt_shader_layout_check_comp, buffers, BUFFERS, &push, sizeof push, 1);
     if (ok) {
         const uint32_t *got = buffers[3].mapped;
         for (size_t i = 0; i < words; i++)
             CHECK_MSG(got[i] == expected[i], "word %zu: shader read 0x%08x, C wrote 0x%08x", i, got[i], expected[i]);
     }
-    for (int i = 0; i < 11; i++) vk_buffer_destroy(gpu->vk, &buffers[i]);
+    for (int i = 0; i < BUFFERS; i++) vk_buffer_destroy(gpu->vk, &buffers[i]);
 }
 
 /* ray_offset() in GLSL against the C function, bit for bit, on hit points from 1e-30 to 1e30,
