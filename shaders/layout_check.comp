@@ -62,7 +62,8 @@ void main()
     put(l.vector); put(l.type); put(l.color); put(l.cdf); put(l.tri); put(l.pick); put(l.area); put(l.pad0);
     vkrt_gpu_lighting g = lightings[1];
     put(g.sky_zenith); put(g.light_count); put(g.sky_horizon); put(g.punctual_count); put(g.ao_distance);
-    put(g.ao_samples); put(g.max_bounces); put(g.target_error);
+    put(g.ao_samples); put(g.max_bounces); put(g.target_error); put(g.pick_scale); put(g.emitter_pick);
+    put(g.seed); put(g.spp);
     vkrt_gpu_path q = paths[1];
     put(q.throughput); put(q.flags); put(q.radiance); put(q.bsdf_pdf); put(q.position); put(q.depth); put(q.normal);
     put(q.tri); put(q.geo_normal); put(q.metallic); put(q.albedo); put(q.roughness); put(q.wo); put(q.pad0);

@@ -19,6 +19,7 @@ layout(constant_id = VKRT_SPEC_ISECT) const uint ISECT = VKRT_GPU_ISECT_WATERTIG
 layout(constant_id = VKRT_SPEC_BUDGET) const uint BUDGET = 0u;
 layout(constant_id = VKRT_SPEC_COUNTERS) const uint COUNTERS = 0u;
 layout(constant_id = VKRT_SPEC_ALPHA) const uint ALPHA = 0u;
+layout(constant_id = VKRT_SPEC_ANYHIT) const uint ANYHIT = 0u;
 
 layout(set = 0, binding = VKRT_BINDING_NODES, std430) readonly buffer Nodes {
     vkrt_gpu_node nodes[];
@@ -210,6 +211,8 @@ bool trace_bvh(ray r, uint slot, inout hit best, inout heat_counts heat)
         heat.tris++;
         test_triangle(r, tri_next, best);
         tri_next++;
+        /* An occlusion query is answered by the first hit. */
+        if (ANYHIT != 0u && best.prim != NO_PRIM) break;
     }
     /* Saved after the loop, not inside it: lavapipe runs the body of an `if` that no lane
      * takes, and a loop in that body would count against its limit on every iteration. */
@@ -231,61 +234,7 @@ bool already_finished(uint slot)
     return BUDGET != 0u && p.resume != 0u && states[slot].unfinished == 0u;
 }
 
-/* Texture coordinates interpolated with the hit's barycentrics (u: corner 1, v: corner 2).
- * Mirrors surface_uv() in src/cpu_trace.c. */
-vec2 surface_uv(vkrt_gpu_surface f, float u, float v)
-{
-    precise float w = 1.0 - u - v;
-    precise float s = (f.u0 * w + f.u1 * u) + f.u2 * v;
-    precise float t = (f.v0 * w + f.v1 * u) + f.v2 * v;
-    return vec2(s, t);
-}
-
-/* The sampling of src/texture.c, function for function: a coordinate brought into one period
- * of its wrap mode, texel indices wrapped (without GLSL's undefined % of negatives), four
- * texels fetched and blended bilinearly. */
-float wrap_coordinate(float u, uint mode)
-{
-    if (!(abs(u) < 1e30)) return 0.0;
-    if (mode == VKRT_GPU_WRAP_CLAMP) return u < -1.0 ? -1.0 : (u > 2.0 ? 2.0 : u);
-    precise float r = mode == VKRT_GPU_WRAP_MIRROR ? u - 2.0 * floor(u * 0.5) : u - floor(u);
-    return r;
-}
-
-int wrap_index(int i, int n, uint mode)
-{
-    if (mode == VKRT_GPU_WRAP_CLAMP) return i < 0 ? 0 : (i >= n ? n - 1 : i);
-    if (mode == VKRT_GPU_WRAP_MIRROR) {
-        int k = i < 0 ? i + 2 * n : (i >= 2 * n ? i - 2 * n : i);
-        return k < n ? k : 2 * n - 1 - k;
-    }
-    return i < 0 ? i + n : (i >= n ? i - n : i);
-}
-
-vec4 fetch_texel(vkrt_gpu_texture t, int x, int y)
-{
-    uvec2 p = texels[t.first + uint(y) * t.width + uint(x)];
-    return vec4(unpackHalf2x16(p.x), unpackHalf2x16(p.y));
-}
-
-vec4 sample_texture(vkrt_gpu_texture t, vec2 uv)
-{
-    int w = int(t.width), h = int(t.height);
-    uint wrap_u = t.wrap & 0xFFu, wrap_v = t.wrap >> 8;
-    precise float x = wrap_coordinate(uv.x, wrap_u) * float(w) - 0.5;
-    precise float y = wrap_coordinate(uv.y, wrap_v) * float(h) - 0.5;
-    float x0 = floor(x), y0 = floor(y);
-    precise float fx = x - x0, fy = y - y0;
-    int ix = int(x0), iy = int(y0);
-    int xa = wrap_index(ix, w, wrap_u), xb = wrap_index(ix + 1, w, wrap_u);
-    int ya = wrap_index(iy, h, wrap_v), yb = wrap_index(iy + 1, h, wrap_v);
-    vec4 c00 = fetch_texel(t, xa, ya), c10 = fetch_texel(t, xb, ya);
-    vec4 c01 = fetch_texel(t, xa, yb), c11 = fetch_texel(t, xb, yb);
-    precise vec4 top = c00 * (1.0 - fx) + c10 * fx;
-    precise vec4 bottom = c01 * (1.0 - fx) + c11 * fx;
-    precise vec4 result = top * (1.0 - fy) + bottom * fy;
-    return result;
-}
+#include "texture.glsl"
 
 /* Whether a hit at barycentrics (u, v) on triangle prim is there: its material is opaque, or
  * its alpha (times the texture's) reaches the cutoff. Mirrors alpha_passes() in
@@ -372,7 +321,20 @@ void store_carried(uint slot, hit best)
     hits[slot] = vkrt_gpu_hit(best.prim != NO_PRIM ? best.t : T_INFINITY, best.tri, best.u, best.v);
 }
 
-/* vkrt_trace_rays: one ray of the buffer, its closest hit written as a vkrt_hit. */
+/* Naive traversal of one ray over this dispatch's chunk; an occlusion query stops at its first
+ * hit (or passes a chunk by when an earlier one found it). */
+void trace_naive_chunk(ray r, inout hit best)
+{
+    if (ANYHIT != 0u && best.prim != NO_PRIM) return;
+    for (uint i = p.tri_first; i < p.tri_end; i++) {
+        test_triangle(r, i, best);
+        if (ANYHIT != 0u && best.prim != NO_PRIM) break;
+    }
+}
+
+/* vkrt_trace_rays: one ray of the buffer, its closest hit written as a vkrt_hit. The wavefront
+ * variant (the lighting modes) names the triangle array index instead of prim_id, for
+ * shade.comp to read, and keeps the float distance, as the CPU's wavefront mirror does. */
 void trace_buffer_ray()
 {
     uint index = gl_WorkGroupID.x * VKRT_TRACE_GROUP_SIZE + gl_LocalInvocationIndex;
@@ -383,8 +345,7 @@ void trace_buffer_ray()
     heat_counts heat = heat_counts(0u, 0u, 0u);
     if (TRAVERSAL == VKRT_GPU_TRAVERSAL_NAIVE) {
         restore_carried(index, best);
-        if (valid)
-            for (uint i = p.tri_first; i < p.tri_end; i++) test_triangle(r, i, best);
+        if (valid) trace_naive_chunk(r, best);
         if (p.last_chunk == 0u) {
             store_carried(index, best);
             return;
@@ -397,6 +358,11 @@ void trace_buffer_ray()
             return; /* its hit is written by the dispatch that finishes it */
         }
     }
+    if (RAYGEN == VKRT_GPU_RAYGEN_WAVEFRONT) {
+        hits[index] = best.prim != NO_PRIM ? vkrt_gpu_hit(best.t, best.tri, best.u, best.v)
+                                           : vkrt_gpu_hit(-1.0, NO_PRIM, 0.0, 0.0);
+        return;
+    }
     if (valid) finish_ray_hit(r, best);
     hits[index] = best.prim != NO_PRIM ? vkrt_gpu_hit(best.t, best.prim, best.u, best.v)
                                        : vkrt_gpu_hit(-1.0, NO_PRIM, 0.0, 0.0);
@@ -404,7 +370,7 @@ void trace_buffer_ray()
 
 void main()
 {
-    if (RAYGEN == VKRT_GPU_RAYGEN_BUFFER) {
+    if (RAYGEN != VKRT_GPU_RAYGEN_CAMERA) {
         trace_buffer_ray();
         return;
     }

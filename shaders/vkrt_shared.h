@@ -51,15 +51,15 @@ typedef struct vkrt_float3 { float x, y, z; } vkrt_float3;
 #define VKRT_SHADE_BINDING_MATERIALS 2
 #define VKRT_SHADE_BINDING_TEXTURES 3
 #define VKRT_SHADE_BINDING_TEXELS 4
-#define VKRT_SHADE_BINDING_LIGHTS 5      /* vkrt_gpu_light table, then the sky (vkrt_gpu_lighting) */
+#define VKRT_SHADE_BINDING_LIGHTS 5      /* vkrt_gpu_light table */
 #define VKRT_SHADE_BINDING_PATHS 6       /* vkrt_gpu_path per pixel of a tile */
 #define VKRT_SHADE_BINDING_ACCUM 7       /* vkrt_gpu_accum per pixel of a tile */
 #define VKRT_SHADE_BINDING_RAYS 8        /* extension rays, traced closest-hit */
 #define VKRT_SHADE_BINDING_HITS 9        /* their hits (tri = triangle array index) */
 #define VKRT_SHADE_BINDING_SHADOW_RAYS 10 /* shadow and AO rays, traced any-hit */
 #define VKRT_SHADE_BINDING_SHADOW_HITS 11
-#define VKRT_SHADE_BINDING_IMAGE 12      /* the tile's mean radiance */
-#define VKRT_SHADE_BINDING_ACTIVE 13     /* one uint: paths still going after a stage */
+#define VKRT_SHADE_BINDING_ACTIVE 12     /* one uint: pixels sampling / paths still going */
+#define VKRT_SHADE_BINDING_LIGHTING 13   /* one vkrt_gpu_lighting */
 #define VKRT_SHADE_BINDING_COUNT 14
 
 /* Specialization constant ids: features a render does not use are compiled out instead of
@@ -149,13 +149,14 @@ typedef struct vkrt_float3 { float x, y, z; } vkrt_float3;
 #define VKRT_RESUME_RAY_CHUNK 65536u
 
 /* Stages of shade.comp, in the order one sample of a tile runs them (vkrt_gpu_push.stage_arg
- * carries the light or AO ray index of VKRT_STAGE_SHADOW). */
+ * carries the light or AO ray index of VKRT_STAGE_SHADOW). A pixel's sample index is the count
+ * of samples its accumulation holds. */
 #define VKRT_STAGE_CAMERA 1  /* primary rays of the pixels still sampling */
 #define VKRT_STAGE_HIT 2     /* closest hits: emission, the sky on a miss, the vertex stored */
 #define VKRT_STAGE_SHADOW 3  /* one shadow or AO ray from the stored vertex */
 #define VKRT_STAGE_BOUNCE 4  /* path: the next direction sampled from the BSDF */
-#define VKRT_STAGE_FINISH 5  /* the last shadow ray resolved, the sample accumulated */
-#define VKRT_STAGE_OUTPUT 6  /* the tile's mean written to the image */
+#define VKRT_STAGE_FINISH 5  /* the last shadow ray resolved, the sample accumulated (the host
+                                reads the tile's accumulation buffer after its last sample) */
 
 /* Features of the lighting modes, each compiled into shade.comp only when the scene and the
  * render use it (the same bits as VKRT_FEATURE_* in vkrt.h). */
@@ -173,6 +174,27 @@ typedef struct vkrt_float3 { float x, y, z; } vkrt_float3;
 #define VKRT_GPU_LIGHT_DIRECTIONAL 0u
 #define VKRT_GPU_LIGHT_POINT 1u
 #define VKRT_GPU_LIGHT_TRIANGLE 2u
+
+/* Sobol' direction numbers of the first four dimensions (Joe, Kuo 2008; dimension 0 is van der
+ * Corput's), 32 per dimension, highest bit first: the sampler (src/sampler.c and
+ * shaders/sampler.glsl) reads this one table on both sides. */
+#define VKRT_SOBOL_DIRECTIONS \
+    0x80000000u, 0x40000000u, 0x20000000u, 0x10000000u, 0x08000000u, 0x04000000u, 0x02000000u, 0x01000000u, \
+    0x00800000u, 0x00400000u, 0x00200000u, 0x00100000u, 0x00080000u, 0x00040000u, 0x00020000u, 0x00010000u, \
+    0x00008000u, 0x00004000u, 0x00002000u, 0x00001000u, 0x00000800u, 0x00000400u, 0x00000200u, 0x00000100u, \
+    0x00000080u, 0x00000040u, 0x00000020u, 0x00000010u, 0x00000008u, 0x00000004u, 0x00000002u, 0x00000001u, \
+    0x80000000u, 0xc0000000u, 0xa0000000u, 0xf0000000u, 0x88000000u, 0xcc000000u, 0xaa000000u, 0xff000000u, \
+    0x80800000u, 0xc0c00000u, 0xa0a00000u, 0xf0f00000u, 0x88880000u, 0xcccc0000u, 0xaaaa0000u, 0xffff0000u, \
+    0x80008000u, 0xc000c000u, 0xa000a000u, 0xf000f000u, 0x88008800u, 0xcc00cc00u, 0xaa00aa00u, 0xff00ff00u, \
+    0x80808080u, 0xc0c0c0c0u, 0xa0a0a0a0u, 0xf0f0f0f0u, 0x88888888u, 0xccccccccu, 0xaaaaaaaau, 0xffffffffu, \
+    0x80000000u, 0xc0000000u, 0x60000000u, 0x90000000u, 0xe8000000u, 0x5c000000u, 0x8e000000u, 0xc5000000u, \
+    0x68800000u, 0x9cc00000u, 0xee600000u, 0x55900000u, 0x80680000u, 0xc09c0000u, 0x60ee0000u, 0x90550000u, \
+    0xe8808000u, 0x5cc0c000u, 0x8e606000u, 0xc5909000u, 0x6868e800u, 0x9c9c5c00u, 0xeeee8e00u, 0x5555c500u, \
+    0x8000e880u, 0xc0005cc0u, 0x60008e60u, 0x9000c590u, 0xe8006868u, 0x5c009c9cu, 0x8e00eeeeu, 0xc5005555u, \
+    0x80000000u, 0xc0000000u, 0x20000000u, 0x50000000u, 0xf8000000u, 0x74000000u, 0xa2000000u, 0x93000000u, \
+    0xd8800000u, 0x25400000u, 0x59e00000u, 0xe6d00000u, 0x78080000u, 0xb40c0000u, 0x82020000u, 0xc3050000u, \
+    0x208f8000u, 0x51474000u, 0xfbea2000u, 0x75d93000u, 0xa0858800u, 0x914e5400u, 0xdbe79e00u, 0x25db6d00u, \
+    0x58800080u, 0xe54000c0u, 0x79e00020u, 0xb6d00050u, 0x800800f8u, 0xc00c0074u, 0x200200a2u, 0x50050093u
 
 /* Miss value written to the id and depth channels. */
 #define VKRT_MISS (-1.0)
@@ -304,8 +326,7 @@ VKRT_STRUCT(vkrt_gpu_light) {
     VKRT_UINT pad0;        /* offset 44 */
 };
 
-/* What lights a render besides its light table, 48 bytes, after the table's entries in the
- * same buffer (read as the first element of a second view). */
+/* What lights a render besides its light table, 64 bytes, in a buffer of its own. */
 VKRT_STRUCT(vkrt_gpu_lighting) {
     VKRT_FLOAT3 sky_zenith;  /* offset  0; radiance from straight up (+y) */
     VKRT_UINT light_count;   /* offset 12; entries in the table */
@@ -315,6 +336,10 @@ VKRT_STRUCT(vkrt_gpu_lighting) {
     VKRT_UINT ao_samples;    /* offset 36; ao: rays per hit per sample */
     VKRT_UINT max_bounces;   /* offset 40; path: bounces after the primary hit */
     float target_error;      /* offset 44; adaptive: relative standard error to stop at */
+    float pick_scale;        /* offset 48; an emissive triangle's pick = its power * pick_scale */
+    float emitter_pick;      /* offset 52; sum of the emissive triangles' picks */
+    VKRT_UINT seed;          /* offset 56; the sampler's scramble seed */
+    VKRT_UINT spp;           /* offset 60; samples per pixel at most */
 };
 
 /* The state of one pixel's path between wavefront stages, 128 bytes. */
@@ -388,7 +413,7 @@ VKRT_STRUCT(vkrt_gpu_push) {
     VKRT_UINT tri_total;   /* offset 80; triangles in the scene */
     VKRT_UINT last_chunk;  /* offset 84; naive traversal: 1 when this chunk writes the image */
     VKRT_UINT resume;      /* offset 88; BVH with a budget: 1 continues saved traversals */
-    VKRT_UINT stage_arg;   /* offset 92; shade.comp: the sample index (CAMERA), or the light or
+    VKRT_UINT stage_arg;   /* offset 92; shade.comp: the light or
                               AO ray of a SHADOW stage */
 };
 
@@ -421,7 +446,7 @@ _Static_assert(sizeof(vkrt_gpu_material) == 64, "vkrt_gpu_material must match st
 _Static_assert(offsetof(vkrt_gpu_material, emissive_texture) == 48, "vkrt_gpu_material.emissive_texture must match std430");
 _Static_assert(sizeof(vkrt_gpu_light) == 48, "vkrt_gpu_light must match std430");
 _Static_assert(offsetof(vkrt_gpu_light, color) == 16, "vkrt_gpu_light.color must match std430");
-_Static_assert(sizeof(vkrt_gpu_lighting) == 48, "vkrt_gpu_lighting must match std430");
+_Static_assert(sizeof(vkrt_gpu_lighting) == 64, "vkrt_gpu_lighting must match std430");
 _Static_assert(sizeof(vkrt_gpu_path) == 128, "vkrt_gpu_path must match std430");
 _Static_assert(offsetof(vkrt_gpu_path, pending) == 112, "vkrt_gpu_path.pending must match std430");
 _Static_assert(sizeof(vkrt_gpu_accum) == 32, "vkrt_gpu_accum must match std430");

@@ -7,7 +7,10 @@
 
 #include "camera.h"
 #include "context.h"
+#include "cpu_integrate.h"
 #include "cpu_trace.h"
+#include "gpu_integrate.h"
+#include "lights.h"
 #include "mesh.h"
 #include "scene_pack.h"
 
@@ -17,8 +20,15 @@
 
 _Static_assert(VKRT_GPU_MODE_NORMAL == VKRT_MODE_NORMAL && VKRT_GPU_MODE_DEPTH == VKRT_MODE_DEPTH &&
                    VKRT_GPU_MODE_HEATMAP == VKRT_MODE_HEATMAP && VKRT_GPU_MODE_ID == VKRT_MODE_ID &&
-                   VKRT_GPU_MODE_ALBEDO == VKRT_MODE_ALBEDO && VKRT_GPU_MODE_UV == VKRT_MODE_UV,
+                   VKRT_GPU_MODE_ALBEDO == VKRT_MODE_ALBEDO && VKRT_GPU_MODE_UV == VKRT_MODE_UV &&
+                   VKRT_GPU_MODE_SHADED == VKRT_MODE_SHADED && VKRT_GPU_MODE_AO == VKRT_MODE_AO &&
+                   VKRT_GPU_MODE_PATH == VKRT_MODE_PATH,
                "shader mode values must equal vkrt_mode");
+_Static_assert(VKRT_GPU_FEATURE_TEXTURES == VKRT_FEATURE_TEXTURES && VKRT_GPU_FEATURE_PUNCTUAL == VKRT_FEATURE_PUNCTUAL &&
+                   VKRT_GPU_FEATURE_EMITTERS == VKRT_FEATURE_EMITTERS && VKRT_GPU_FEATURE_SKY == VKRT_FEATURE_SKY &&
+                   VKRT_GPU_FEATURE_SPECULAR == VKRT_FEATURE_SPECULAR && VKRT_GPU_FEATURE_RANDOM == VKRT_FEATURE_RANDOM &&
+                   VKRT_GPU_FEATURE_ADAPTIVE == VKRT_FEATURE_ADAPTIVE && VKRT_GPU_FEATURE_ALL == VKRT_FEATURE_ALL,
+               "shader feature bits must equal VKRT_FEATURE_*");
 _Static_assert(VKRT_GPU_TRAVERSAL_BVH == VKRT_TRAVERSAL_BVH && VKRT_GPU_TRAVERSAL_NAIVE == VKRT_TRAVERSAL_NAIVE,
                "shader traversal values must equal vkrt_traversal");
 _Static_assert(VKRT_GPU_HEAT_NODES == VKRT_HEAT_NODES && VKRT_GPU_HEAT_LEAVES == VKRT_HEAT_LEAVES &&
@@ -120,6 +130,7 @@ void vkrt_scene_destroy(vkrt_scene *scene)
     core_free(c, scene->materials);
     core_free(c, scene->textures);
     core_free(c, scene->texels);
+    core_free(c, scene->lights);
     core_free(c, scene);
 }
 
@@ -249,7 +260,27 @@ vkrt_result vkrt_scene_create(vkrt_context *ctx, const vkrt_scene_desc *desc, vk
     }
     s->material_count = m.material_count;
     s->texture_count = m.texture_count;
-    for (uint32_t i = 0; i < m.material_count; i++) s->alpha_tested |= m.materials[i].alpha_cutoff > 0.0f;
+    for (uint32_t i = 0; i < m.material_count; i++) {
+        s->alpha_tested |= m.materials[i].alpha_cutoff > 0.0f;
+        s->has_metals |= m.materials[i].metallic > 0.0f;
+    }
+    if (m.light_count) {
+        s->lights = core_alloc_array(c, m.light_count, sizeof *s->lights);
+        if (!s->lights) {
+            r = core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "out of memory for %u lights", m.light_count);
+            goto fail;
+        }
+        memcpy(s->lights, m.lights, m.light_count * sizeof *s->lights);
+        s->light_count = m.light_count;
+    }
+    {
+        double r2 = 0.0;
+        for (int k = 0; k < 3; k++) {
+            double e = 0.5 * ((double)m.bounds_max[k] - m.bounds_min[k]);
+            r2 += e * e;
+        }
+        s->radius = (float)sqrt(r2);
+    }
     if (!m.texture_count) memset(s->textures, 0, sizeof *s->textures);
     if (!s->texel_count) memset(s->texels, 0, 2 * sizeof *s->texels);
     scene_pack_surfaces(&m, s->surfaces, s->materials, s->textures, s->texels);
@@ -327,6 +358,121 @@ size_t vkrt_render_floats(uint32_t width, uint32_t height)
     return pixels * 4;
 }
 
+const char *vkrt_feature_name(uint32_t feature)
+{
+    switch (feature) {
+    case VKRT_FEATURE_TEXTURES: return "textures";
+    case VKRT_FEATURE_PUNCTUAL: return "point and directional lights";
+    case VKRT_FEATURE_EMITTERS: return "emissive triangles";
+    case VKRT_FEATURE_SKY: return "sky";
+    case VKRT_FEATURE_SPECULAR: return "metals (GGX and mirrors)";
+    case VKRT_FEATURE_RANDOM: return "random numbers";
+    case VKRT_FEATURE_ADAPTIVE: return "adaptive sampling";
+    default: return "";
+    }
+}
+
+static bool sky_is_black(const vkrt_gpu_lighting *l)
+{
+    return l->sky_zenith.x == 0.0f && l->sky_zenith.y == 0.0f && l->sky_zenith.z == 0.0f && l->sky_horizon.x == 0.0f &&
+           l->sky_horizon.y == 0.0f && l->sky_horizon.z == 0.0f;
+}
+
+/* The features a lighting render needs: what the scene has and the render asks for. */
+static uint32_t lighting_features(const vkrt_scene *scene, const light_table *t, vkrt_mode mode, float target_error)
+{
+    uint32_t f = 0;
+    if (scene->texture_count > 0) f |= VKRT_GPU_FEATURE_TEXTURES;
+    if (t->lighting.punctual_count > 0) f |= VKRT_GPU_FEATURE_PUNCTUAL;
+    if (t->count > t->lighting.punctual_count) f |= VKRT_GPU_FEATURE_EMITTERS;
+    if (!sky_is_black(&t->lighting)) f |= VKRT_GPU_FEATURE_SKY;
+    if (scene->has_metals) f |= VKRT_GPU_FEATURE_SPECULAR;
+    /* Shaded with only point and directional lights is deterministic: one sample is exact. */
+    if (mode != VKRT_MODE_SHADED || (f & VKRT_GPU_FEATURE_EMITTERS)) f |= VKRT_GPU_FEATURE_RANDOM;
+    if (target_error > 0.0f && (f & VKRT_GPU_FEATURE_RANDOM)) f |= VKRT_GPU_FEATURE_ADAPTIVE;
+    /* AO reads only geometry. */
+    if (mode == VKRT_MODE_AO) f &= VKRT_GPU_FEATURE_RANDOM | VKRT_GPU_FEATURE_ADAPTIVE;
+    return f;
+}
+
+#define MAX_SPP 65536u
+#define MAX_AO_SAMPLES 256u
+#define MAX_BOUNCES 64u
+
+/* shaded, ao and path: the light table, the features, then either backend. */
+static vkrt_result render_lighting(vkrt_context *ctx, vkrt_scene *scene, const vkrt_render_desc *d, vkrt_mode mode,
+                                   vkrt_traversal traversal, const vkrt_gpu_push *camera, camera_basis camera_d,
+                                   float *out_rgba, vkrt_render_stats *out_stats)
+{
+    core *c = &ctx->core;
+    if (d->precision == VKRT_PRECISION_DOUBLE)
+        return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT,
+                         "vkrt_render_desc.precision: the lighting modes trace in float (double is for the primary modes' reference)");
+    if (d->light_count && !d->lights)
+        return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "vkrt_render_desc.lights is NULL but light_count is %u", d->light_count);
+    if (d->spp > MAX_SPP) return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "vkrt_render_desc.spp %u exceeds %u", d->spp, MAX_SPP);
+    if (d->ao_samples > MAX_AO_SAMPLES)
+        return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "vkrt_render_desc.ao_samples %u exceeds %u", d->ao_samples, MAX_AO_SAMPLES);
+    if (d->max_bounces > MAX_BOUNCES)
+        return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "vkrt_render_desc.max_bounces %u exceeds %u", d->max_bounces, MAX_BOUNCES);
+    if (!(d->ao_distance >= 0.0f) || !isfinite(d->ao_distance))
+        return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "vkrt_render_desc.ao_distance must be finite and >= 0 (%g)", d->ao_distance);
+    if (!(d->target_error >= 0.0f) || !isfinite(d->target_error))
+        return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "vkrt_render_desc.target_error must be finite and >= 0 (%g)", d->target_error);
+    vkrt_result r = ensure_surfaces(scene, true);
+    if (r != VKRT_OK) return r;
+    light_table table;
+    const light_table_desc ld = {
+        .render_lights = d->lights, .render_light_count = d->light_count, .scene_lights = scene->lights,
+        .scene_light_count = scene->light_count, .sky = d->sky, .tris = scene->tris, .tri_count = scene->bvh.tri_count,
+        .surfaces = scene->surfaces, .materials = scene->materials, .scene_radius = scene->radius,
+    };
+    if ((r = light_table_build(c, &ld, &table)) != VKRT_OK) return r;
+    uint32_t features = lighting_features(scene, &table, mode, d->target_error);
+    if (d->all_features) features = VKRT_GPU_FEATURE_ALL;
+    vkrt_gpu_lighting lighting = table.lighting;
+    lighting.ao_distance = d->ao_distance > 0.0f ? d->ao_distance : 0.5f;
+    lighting.ao_samples = d->ao_samples ? d->ao_samples : 4u;
+    lighting.max_bounces = d->max_bounces ? d->max_bounces : 8u;
+    lighting.target_error = d->target_error;
+    lighting.seed = d->seed;
+    lighting.spp = d->spp ? d->spp : (mode == VKRT_MODE_PATH ? 16u : 1u);
+
+    double t0 = core_now_ms();
+    double trace_ms = 0.0;
+    trace_counts counts = { 0 };
+    if (ctx->vk) {
+        gpu_integrate_params p = {
+            .camera = *camera, .mode = mode, .traversal = traversal, .intersector = d->intersector,
+            .alpha_tested = scene->alpha_tested, .lights = &table, .lighting = lighting, .features = features,
+            .out_error = d->out_error, .progress = d->progress, .progress_user = d->progress_user,
+        };
+        r = gpu_integrate_render(ctx->vk, &scene->gpu, &p, out_rgba, &trace_ms, &counts);
+    } else {
+        cpu_lighting lit = { table.lights, lighting, features, d->out_error };
+        cpu_trace_scene s = cpu_scene_of(scene);
+        cpu_trace_params p = {
+            .camera = *camera, .mode = mode, .traversal = traversal, .heat = VKRT_HEAT_NODES,
+            .intersector = d->intersector, .camera_d = camera_d, .lighting = &lit, .threads = ctx->cpu_threads,
+            .progress = d->progress, .progress_user = d->progress_user,
+        };
+        r = cpu_trace_render(c, &s, &p, out_rgba, &counts);
+        trace_ms = core_now_ms() - t0;
+    }
+    if (r == VKRT_OK && out_stats) {
+        out_stats->trace_ms = trace_ms;
+        out_stats->total_ms = core_now_ms() - t0;
+        out_stats->rays = (uint64_t)d->width * d->height;
+        out_stats->features = features;
+        out_stats->lights = table.count;
+        out_stats->samples = counts.samples;
+        out_stats->shadow_rays = counts.shadow_rays;
+        out_stats->bounce_rays = counts.bounce_rays;
+    }
+    light_table_destroy(c, &table);
+    return r;
+}
+
 vkrt_result vkrt_render(vkrt_context *ctx, vkrt_scene *scene, const vkrt_render_desc *desc, float *out_rgba,
                         size_t out_floats, vkrt_render_stats *out_stats)
 {
@@ -343,7 +489,7 @@ vkrt_result vkrt_render(vkrt_context *ctx, vkrt_scene *scene, const vkrt_render_
     if (d.width > MAX_IMAGE_SIZE || d.height > MAX_IMAGE_SIZE)
         return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "image size %ux%u exceeds %u on a side", d.width, d.height,
                          MAX_IMAGE_SIZE);
-    if (d.mode > VKRT_MODE_UV) return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "vkrt_render_desc.mode has no valid value (%d)", (int)d.mode);
+    if (d.mode > VKRT_MODE_PATH) return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "vkrt_render_desc.mode has no valid value (%d)", (int)d.mode);
     if (d.traversal > VKRT_TRAVERSAL_NAIVE)
         return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "vkrt_render_desc.traversal has no valid value (%d)", (int)d.traversal);
     if (d.heat > VKRT_HEAT_TRIS) return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "vkrt_render_desc.heat has no valid value (%d)", (int)d.heat);
@@ -362,6 +508,17 @@ vkrt_result vkrt_render(vkrt_context *ctx, vkrt_scene *scene, const vkrt_render_
     vkrt_mode mode = d.mode ? d.mode : VKRT_MODE_NORMAL;
     vkrt_traversal traversal = d.traversal ? d.traversal : VKRT_TRAVERSAL_BVH;
     vkrt_heat heat = d.heat ? d.heat : VKRT_HEAT_NODES;
+    /* The cost model: with C_trav = C_isect = 1 a ray through the BVH is expected to cost the
+     * scene's SAH cost, and a naive one a test per triangle; where the BVH saves nothing the
+     * default traversal is naive. The heat map shows the BVH, so it keeps it. */
+    bool naive_by_cost = d.traversal == VKRT_TRAVERSAL_DEFAULT && mode != VKRT_MODE_HEATMAP &&
+                         scene->stats.sah_cost >= (double)scene->stats.triangles;
+    if (naive_by_cost) traversal = VKRT_TRAVERSAL_NAIVE;
+    if (mode >= VKRT_MODE_SHADED) {
+        r = render_lighting(ctx, scene, &d, mode, traversal, &camera, camera_d, out_rgba, out_stats);
+        if (r == VKRT_OK && out_stats) out_stats->naive_by_cost = naive_by_cost;
+        return r;
+    }
 
     double t0 = core_now_ms();
     double trace_ms = 0.0;
@@ -391,6 +548,7 @@ vkrt_result vkrt_render(vkrt_context *ctx, vkrt_scene *scene, const vkrt_render_
         out_stats->nodes_visited = counts.nodes;
         out_stats->leaves_visited = counts.leaves;
         out_stats->tris_tested = counts.tris;
+        out_stats->naive_by_cost = naive_by_cost;
     }
     return r;
 }
@@ -417,13 +575,14 @@ vkrt_result vkrt_trace_rays(vkrt_context *ctx, vkrt_scene *scene, const vkrt_tra
     if (ctx->vk) {
         gpu_trace_rays_params p = {
             .traversal = traversal, .intersector = d.intersector, .alpha_tested = scene->alpha_tested,
+            .any_hit = d.any_hit,
             .progress = d.progress, .progress_user = d.progress_user,
         };
         if ((r = ensure_surfaces(scene, false)) == VKRT_OK) r = gpu_trace_rays(ctx->vk, &scene->gpu, &p, rays, count, out_hits);
     } else {
         cpu_trace_scene s = cpu_scene_of(scene);
         cpu_trace_rays_params p = {
-            .traversal = traversal, .intersector = d.intersector, .precision = d.precision,
+            .traversal = traversal, .any_hit = d.any_hit, .intersector = d.intersector, .precision = d.precision,
             .threads = ctx->cpu_threads, .progress = d.progress, .progress_user = d.progress_user,
         };
         r = cpu_trace_rays(c, &s, &p, rays, count, out_hits);

@@ -26,6 +26,10 @@ struct vkrt_scene {
     uint32_t *texels;          /* 2 words per texel, every texture's in turn */
     size_t texel_count;
     bool alpha_tested;         /* some material has alpha_cutoff > 0 */
+    bool has_metals;           /* some material has metallic > 0: the lighting modes' GGX code */
+    vkrt_light *lights;        /* the file's punctual lights, in traced coordinates */
+    uint32_t light_count;
+    float radius;              /* of the scene's bounding sphere */
     gpu_scene gpu;             /* device copies (GPU backend) */
     vkrt_scene_stats stats;
 };

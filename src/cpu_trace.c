@@ -10,6 +10,7 @@
 #include <stdatomic.h>
 #include <stdbool.h>
 
+#include "cpu_integrate.h"
 #include "scene_pack.h"
 #include "texture.h"
 
@@ -102,6 +103,30 @@ static float refine_hit_distance(vec3_d origin, vec3_d dir, double tmin, double 
     return refined > tmin && refined < tmax ? (float)refined : t;
 }
 
+vkrt_gpu_ray cpu_trace_camera_ray(const vkrt_gpu_push *camera, uint32_t x, uint32_t y)
+{
+    camera_f cam = { v_load_f(camera->eye), v_load_f(camera->right), v_load_f(camera->up), v_load_f(camera->forward),
+                     camera->width, camera->height };
+    ray_f r = camera_ray_f(&cam, x, y);
+    return (vkrt_gpu_ray){ { r.origin.x, r.origin.y, r.origin.z }, 0.0f, { r.dir.x, r.dir.y, r.dir.z }, 0.0f };
+}
+
+bool cpu_trace_one(const cpu_trace_scene *s, vkrt_traversal traversal, vkrt_intersector isect, const vkrt_gpu_ray *ray,
+                   bool any_hit, vkrt_gpu_hit *out_hit, trace_counts *counts)
+{
+    ray_f r;
+    heat_counts heat = { 0 };
+    hit best = { .prim = NO_PRIM };
+    /* vkrt_gpu_ray and vkrt_ray share one layout (asserted in api.c). */
+    if (ray_from_buffer_f((const vkrt_ray *)ray, &r)) best = trace_ray_f(s, traversal, isect, &r, &heat, any_hit);
+    counts->nodes += heat.nodes;
+    counts->leaves += heat.leaves;
+    counts->tris += heat.tris;
+    *out_hit = best.prim != NO_PRIM ? (vkrt_gpu_hit){ best.t, best.tri, best.u, best.v }
+                                    : (vkrt_gpu_hit){ -1.0f, NO_PRIM, 0.0f, 0.0f };
+    return best.prim != NO_PRIM;
+}
+
 static void shade(const cpu_trace_scene *s, const cpu_trace_params *p, const hit *best, const heat_counts *heat,
                   float out[4])
 {
@@ -184,6 +209,7 @@ struct job {
     float *out;
     uint32_t tiles_x;
     atomic_uint_fast64_t count_nodes, count_leaves, count_tris; /* params->counters */
+    atomic_uint_fast64_t count_samples, count_shadow, count_bounce; /* lighting modes */
     /* rays */
     const cpu_trace_rays_params *rays_params;
     const vkrt_ray *rays;
@@ -196,6 +222,10 @@ static void trace_pixel(const job *j, uint32_t x, uint32_t y, float out[4], trac
 {
     const cpu_trace_scene *s = j->scene;
     const cpu_trace_params *p = j->params;
+    if (p->lighting) {
+        cpu_integrate_pixel(s, p, x, y, out, counts);
+        return;
+    }
     hit best = { .t = INFINITY, .tri = NO_PRIM, .prim = NO_PRIM };
     heat_counts heat = { 0 };
     if (p->traversal == VKRT_TRAVERSAL_NAIVE) heat.tris = s->tri_count;
@@ -203,10 +233,10 @@ static void trace_pixel(const job *j, uint32_t x, uint32_t y, float out[4], trac
     if (p->traversal != VKRT_TRAVERSAL_NAIVE || p->mode != VKRT_MODE_HEATMAP) {
         if (p->precision == VKRT_PRECISION_DOUBLE) {
             ray_d r = camera_ray_d(&j->cam_d, x, y);
-            best = trace_ray_d(s, p->traversal, p->intersector, &r, &heat);
+            best = trace_ray_d(s, p->traversal, p->intersector, &r, &heat, false);
         } else {
             ray_f r = camera_ray_f(&j->cam_f, x, y);
-            best = trace_ray_f(s, p->traversal, p->intersector, &r, &heat);
+            best = trace_ray_f(s, p->traversal, p->intersector, &r, &heat, false);
             if (best.prim != NO_PRIM) {
                 ray_d exact = camera_ray_d(&j->cam_d, x, y);
                 best.t = refine_hit_distance(exact.origin, exact.dir, 0.0, INFINITY, &s->tris[best.tri], best.t);
@@ -235,6 +265,11 @@ static bool run_tile(job *j, size_t t)
         atomic_fetch_add_explicit(&j->count_leaves, counts.leaves, memory_order_relaxed);
         atomic_fetch_add_explicit(&j->count_tris, counts.tris, memory_order_relaxed);
     }
+    if (j->params->lighting) {
+        atomic_fetch_add_explicit(&j->count_samples, counts.samples, memory_order_relaxed);
+        atomic_fetch_add_explicit(&j->count_shadow, counts.shadow_rays, memory_order_relaxed);
+        atomic_fetch_add_explicit(&j->count_bounce, counts.bounce_rays, memory_order_relaxed);
+    }
     return true;
 }
 
@@ -245,10 +280,10 @@ static vkrt_hit trace_one_ray(const job *j, const vkrt_ray *in)
     hit best = { .prim = NO_PRIM };
     if (p->precision == VKRT_PRECISION_DOUBLE) {
         ray_d r;
-        if (ray_from_buffer_d(in, &r)) best = trace_ray_d(j->scene, p->traversal, p->intersector, &r, &heat);
+        if (ray_from_buffer_d(in, &r)) best = trace_ray_d(j->scene, p->traversal, p->intersector, &r, &heat, p->any_hit);
     } else {
         ray_f r;
-        if (ray_from_buffer_f(in, &r)) best = trace_ray_f(j->scene, p->traversal, p->intersector, &r, &heat);
+        if (ray_from_buffer_f(in, &r)) best = trace_ray_f(j->scene, p->traversal, p->intersector, &r, &heat, p->any_hit);
         if (best.prim != NO_PRIM)
             best.t = refine_hit_distance((vec3_d){ r.origin.x, r.origin.y, r.origin.z }, (vec3_d){ r.dir.x, r.dir.y, r.dir.z },
                                          r.tmin, r.tmax, &j->scene->tris[best.tri], best.t);
@@ -346,8 +381,13 @@ vkrt_result cpu_trace_render(core *c, const cpu_trace_scene *scene, const cpu_tr
     atomic_init(&j.count_nodes, 0);
     atomic_init(&j.count_leaves, 0);
     atomic_init(&j.count_tris, 0);
+    atomic_init(&j.count_samples, 0);
+    atomic_init(&j.count_shadow, 0);
+    atomic_init(&j.count_bounce, 0);
     vkrt_result r = run_job(c, &j, params->threads, params->progress, params->progress_user);
-    *out_counts = (trace_counts){ atomic_load(&j.count_nodes), atomic_load(&j.count_leaves), atomic_load(&j.count_tris) };
+    *out_counts = (trace_counts){ atomic_load(&j.count_nodes), atomic_load(&j.count_leaves), atomic_load(&j.count_tris),
+                                  atomic_load(&j.count_samples), atomic_load(&j.count_shadow),
+                                  atomic_load(&j.count_bounce) };
     return r;
 }
 

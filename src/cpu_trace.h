@@ -33,6 +33,7 @@ typedef struct cpu_trace_params {
     camera_basis camera_d;      /* camera_setup_double: double traces from it; float refines its
                                    hit distances with it */
     bool counters;              /* fill *out_counts */
+    const struct cpu_lighting *lighting; /* lighting modes (cpu_integrate.h); NULL for the others */
     uint32_t threads;           /* >= 1 */
     vkrt_progress_fn progress;  /* may be NULL; called from the calling thread */
     void *progress_user;
@@ -46,6 +47,7 @@ vkrt_result cpu_trace_render(core *c, const cpu_trace_scene *scene, const cpu_tr
 
 typedef struct cpu_trace_rays_params {
     vkrt_traversal traversal;     /* resolved */
+    bool any_hit;                 /* the first hit found, not the closest */
     vkrt_intersector intersector; /* _DEFAULT: watertight */
     vkrt_precision precision;     /* _DEFAULT: float */
     uint32_t threads;             /* >= 1 */
@@ -57,5 +59,15 @@ typedef struct cpu_trace_rays_params {
  * cpu_trace_render. */
 vkrt_result cpu_trace_rays(core *c, const cpu_trace_scene *scene, const cpu_trace_rays_params *params,
                            const vkrt_ray *rays, size_t count, vkrt_hit *out_hits);
+
+/* The primary ray of pixel (x, y) in float, as shaders/trace_common.glsl's camera_ray makes it
+ * (tmax = 0: infinity). */
+vkrt_gpu_ray cpu_trace_camera_ray(const vkrt_gpu_push *camera, uint32_t x, uint32_t y);
+
+/* One ray as trace.comp's wavefront variant traces it: the closest hit (or with any_hit the
+ * first found) with out_hit->tri the triangle array index and t unrefined; t = -1 and tri =
+ * 0xFFFFFFFF on a miss. Adds the traversal counts to *counts. Returns whether it hit. */
+bool cpu_trace_one(const cpu_trace_scene *s, vkrt_traversal traversal, vkrt_intersector isect, const vkrt_gpu_ray *ray,
+                   bool any_hit, vkrt_gpu_hit *out_hit, trace_counts *counts);
 
 #endif

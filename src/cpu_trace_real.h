@@ -237,8 +237,10 @@ static bool R(intersect_box)(const R(ray) *r, const vkrt_gpu_node *n, REAL best_
     return tnear <= tfar;
 }
 
+/* any_hit: stop at the first hit (shadow and AO rays), as trace_bvh in shaders/trace.comp does
+ * with ANYHIT. */
 static void R(trace_bvh)(const cpu_trace_scene *s, vkrt_intersector isect, const R(ray) *r, R(hit) *best,
-                         heat_counts *heat)
+                         heat_counts *heat, bool any_hit)
 {
     if (s->node_count == 0) return;
     uint32_t stack_node[VKRT_TRAVERSAL_STACK_SIZE];
@@ -256,6 +258,7 @@ static void R(trace_bvh)(const cpu_trace_scene *s, vkrt_intersector isect, const
             for (uint32_t i = n->left_first; i < n->left_first + n->tri_count; i++) {
                 heat->tris++;
                 R(test_triangle)(isect, r, s, i, best);
+                if (any_hit && best->prim != NO_PRIM) return;
             }
         } else {
             uint32_t left = n->left_first, right = left + 1;
@@ -298,18 +301,23 @@ static void R(trace_bvh)(const cpu_trace_scene *s, vkrt_intersector isect, const
     }
 }
 
-static void R(trace_naive)(const cpu_trace_scene *s, vkrt_intersector isect, const R(ray) *r, R(hit) *best)
+static void R(trace_naive)(const cpu_trace_scene *s, vkrt_intersector isect, const R(ray) *r, R(hit) *best,
+                           bool any_hit)
 {
-    for (uint32_t i = 0; i < s->tri_count; i++) R(test_triangle)(isect, r, s, i, best);
+    for (uint32_t i = 0; i < s->tri_count; i++) {
+        R(test_triangle)(isect, r, s, i, best);
+        if (any_hit && best->prim != NO_PRIM) return;
+    }
 }
 
-/* Closest hit of one ray with the chosen traversal, as the float hit the shading reads. */
+/* Closest (or with any_hit, the first found) hit of one ray with the chosen traversal, as the
+ * float hit the shading reads. */
 static hit R(trace_ray)(const cpu_trace_scene *s, vkrt_traversal traversal, vkrt_intersector isect, const R(ray) *r,
-                        heat_counts *heat)
+                        heat_counts *heat, bool any_hit)
 {
     R(hit) best = { .t = r->tmax, .tri = NO_PRIM, .prim = NO_PRIM };
-    if (traversal == VKRT_TRAVERSAL_NAIVE) R(trace_naive)(s, isect, r, &best);
-    else R(trace_bvh)(s, isect, r, &best, heat);
+    if (traversal == VKRT_TRAVERSAL_NAIVE) R(trace_naive)(s, isect, r, &best, any_hit);
+    else R(trace_bvh)(s, isect, r, &best, heat, any_hit);
     return (hit){ .t = (float)best.t, .u = (float)best.u, .v = (float)best.v, .tri = best.tri, .prim = best.prim };
 }
 

@@ -494,7 +494,8 @@ static vkrt_result read_unfinished(vk_context *vk, render_objects *o, uint32_t *
 }
 
 static void record_rays(VkCommandBuffer cmd, const vk_trace_pipeline *pipe, const render_objects *o,
-                        const gpu_scene *scene, vkrt_gpu_push push, bool naive, bool budget, bool first_chunk);
+                        const gpu_scene *scene, vkrt_gpu_push push, bool naive, bool budget, bool first_chunk,
+                        bool device_only);
 
 /* What one tile or ray chunk is traced with. */
 typedef struct pass_desc {
@@ -502,6 +503,7 @@ typedef struct pass_desc {
     const gpu_scene *scene;
     bool naive, budget;
     bool rays;         /* a ray chunk, else an image tile */
+    bool device_only;  /* rays whose hits stay on the device (the wavefront): no readback */
     bool first;        /* the first tile or chunk of the call */
     const char *what;  /* "render" or "trace", for the cancellation message */
     vkrt_progress_fn progress;
@@ -521,13 +523,13 @@ static vkrt_result run_passes(vk_context *vk, render_objects *o, const pass_desc
         VkCommandBuffer cmd;
         vkrt_result r = vk_commands_begin(vk, &cmd);
         if (r != VKRT_OK) return r;
-        if (d->rays) record_rays(cmd, d->pipe, o, d->scene, push, d->naive, d->budget, d->first);
+        if (d->rays) record_rays(cmd, d->pipe, o, d->scene, push, d->naive, d->budget, d->first, d->device_only);
         else record_tile(cmd, d->pipe, o, d->scene, push, d->naive, d->budget, d->first);
         if ((r = vk_commands_submit_wait(vk, cmd)) != VKRT_OK) return r;
         if (device_ms) *device_ms += tile_device_ms(vk, o);
         uint32_t unfinished = 0;
         if (d->budget && (r = read_unfinished(vk, o, &unfinished)) != VKRT_OK) return r;
-        if (unfinished == 0) return vk_buffer_invalidate(vk, &o->readback);
+        if (unfinished == 0) return d->device_only ? VKRT_OK : vk_buffer_invalidate(vk, &o->readback);
         if (d->progress && !d->progress(d->progress_user, "trace", d->fraction))
             return core_fail(vk->core, VKRT_ERROR_CANCELLED, "%s cancelled by the progress callback", d->what);
         push.resume = 1;
@@ -603,24 +605,27 @@ vkrt_result gpu_trace_render(vk_context *vk, const gpu_scene *scene, const gpu_t
 /* Records one pass over a chunk of rays (its first, or a resume): dispatch(es) over the rays,
  * then a copy of the hits into the readback buffer. */
 static void record_rays(VkCommandBuffer cmd, const vk_trace_pipeline *pipe, const render_objects *o,
-                        const gpu_scene *scene, vkrt_gpu_push push, bool naive, bool budget, bool first_chunk)
+                        const gpu_scene *scene, vkrt_gpu_push push, bool naive, bool budget, bool first_chunk,
+                        bool device_only)
 {
     /* The storage image is never written in ray mode, but its descriptor must be in the layout
      * it names. */
     if (first_chunk && !push.resume) record_image_to_general(cmd, o, true, false);
-    /* The shader reads the rays the host (or a staging copy) wrote, and overwrites hits that
-     * the previous chunk's copy read. */
+    /* The shader reads the rays the host, a staging copy or (the wavefront) shade.comp wrote,
+     * and overwrites hits that the previous chunk's copy or shade stage read. */
     VkMemoryBarrier inputs = {
         .sType = VK_STRUCTURE_TYPE_MEMORY_BARRIER,
-        .srcAccessMask = VK_ACCESS_HOST_WRITE_BIT | VK_ACCESS_TRANSFER_WRITE_BIT | VK_ACCESS_TRANSFER_READ_BIT,
+        .srcAccessMask = VK_ACCESS_HOST_WRITE_BIT | VK_ACCESS_TRANSFER_WRITE_BIT | VK_ACCESS_TRANSFER_READ_BIT |
+                         VK_ACCESS_SHADER_WRITE_BIT | VK_ACCESS_SHADER_READ_BIT,
         .dstAccessMask = VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT,
     };
-    vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_HOST_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT,
+    vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_HOST_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT | VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
                          VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT, 0, 1, &inputs, 0, NULL,
                          0, NULL);
     /* One invocation per ray, 1D over whole workgroups; VKRT_RAY_CHUNK keeps the count of
      * groups far below the 65,535 a dispatch allows. */
     record_dispatches(cmd, pipe, o, scene, push, naive, budget, div_up(push.tile_width, VKRT_TRACE_GROUP_SIZE), 1);
+    if (device_only) return;
     /* The copy reads the hits the shader wrote. */
     record_buffer_barrier(cmd, o->hits.buffer, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_WRITE_BIT,
                           VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_READ_BIT);
@@ -644,6 +649,7 @@ vkrt_result gpu_trace_rays(vk_context *vk, const gpu_scene *scene, const gpu_tra
         .isect = gpu_isect(params->intersector),
         .budget = naive ? 0 : vk->trace_budget,
         .alpha = params->alpha_tested,
+        .anyhit = params->any_hit,
     };
     vk_trace_pipeline pipe;
     vkrt_result r = vk_trace_pipeline_get(vk, variant, &pipe);
@@ -674,4 +680,77 @@ vkrt_result gpu_trace_rays(vk_context *vk, const gpu_scene *scene, const gpu_tra
     if (r == VKRT_OK && params->progress) params->progress(params->progress_user, "trace", 1.0f);
     render_objects_destroy(vk, &o);
     return r;
+}
+
+/* ---- the wavefront's traversal passes ---- */
+
+struct gpu_wavefront_tracer {
+    vk_trace_pipeline pipe;
+    render_objects o;
+    bool naive, budget;
+    bool first;
+    uint32_t capacity;
+};
+
+vkrt_result gpu_wavefront_tracer_create(vk_context *vk, const gpu_scene *scene, const gpu_trace_rays_params *params,
+                                        uint32_t capacity, gpu_wavefront_tracer **out)
+{
+    *out = NULL;
+    const bool naive = params->traversal == VKRT_TRAVERSAL_NAIVE;
+    vk_trace_variant variant = {
+        .mode = VKRT_GPU_MODE_ID,
+        .traversal = naive ? VKRT_GPU_TRAVERSAL_NAIVE : VKRT_GPU_TRAVERSAL_BVH,
+        .heat = VKRT_GPU_HEAT_NODES,
+        .raygen = VKRT_GPU_RAYGEN_WAVEFRONT,
+        .isect = gpu_isect(params->intersector),
+        .budget = naive ? 0 : vk->trace_budget,
+        .alpha = params->alpha_tested,
+        .anyhit = params->any_hit,
+    };
+    gpu_wavefront_tracer *t = core_calloc_array(vk->core, 1, sizeof *t);
+    if (!t) return core_fail(vk->core, VKRT_ERROR_OUT_OF_MEMORY, "out of memory for a wavefront tracer");
+    vkrt_result r = vk_trace_pipeline_get(vk, variant, &t->pipe);
+    t->naive = naive;
+    t->budget = variant.budget != 0;
+    t->first = true;
+    t->capacity = capacity;
+    if (r == VKRT_OK)
+        r = create_render_objects(vk, scene, t->pipe.set_layout, 1, 1, capacity, capacity, t->budget ? capacity : 0, 0,
+                                  &t->o);
+    if (r != VKRT_OK) {
+        gpu_wavefront_tracer_destroy(vk, t);
+        return r;
+    }
+    *out = t;
+    return VKRT_OK;
+}
+
+VkBuffer gpu_wavefront_rays(const gpu_wavefront_tracer *t)
+{
+    return t->o.rays.buffer;
+}
+
+VkBuffer gpu_wavefront_hits(const gpu_wavefront_tracer *t)
+{
+    return t->o.hits.buffer;
+}
+
+vkrt_result gpu_wavefront_trace(vk_context *vk, gpu_wavefront_tracer *t, const gpu_scene *scene, uint32_t count,
+                                double *device_ms)
+{
+    if (count > t->capacity)
+        return core_fail(vk->core, VKRT_ERROR_INVALID_ARGUMENT, "%u rays exceed the wavefront's %u", count, t->capacity);
+    vkrt_gpu_push push = { .tile_width = count, .tile_height = 1, .tri_end = scene->tri_count,
+                           .tri_total = scene->tri_count, .last_chunk = 1 };
+    const pass_desc pass = { .pipe = &t->pipe, .scene = scene, .naive = t->naive, .budget = t->budget, .rays = true,
+                             .device_only = true, .first = t->first, .what = "render" };
+    t->first = false;
+    return run_passes(vk, &t->o, &pass, push, device_ms);
+}
+
+void gpu_wavefront_tracer_destroy(vk_context *vk, gpu_wavefront_tracer *t)
+{
+    if (!t) return;
+    render_objects_destroy(vk, &t->o);
+    core_free(vk->core, t);
 }

@@ -63,6 +63,7 @@ vkrt_result gpu_trace_render(vk_context *vk, const gpu_scene *scene, const gpu_t
 
 typedef struct gpu_trace_rays_params {
     vkrt_traversal traversal;     /* resolved */
+    bool any_hit;                 /* the first hit found, not the closest */
     vkrt_intersector intersector; /* _DEFAULT: watertight */
     bool alpha_tested;            /* as in gpu_trace_params */
     vkrt_progress_fn progress;    /* may be NULL; called between submissions */
@@ -73,5 +74,20 @@ typedef struct gpu_trace_rays_params {
  * (VKRT_RESUME_RAY_CHUNK with a loop budget, plus resume submissions while any is unfinished). */
 vkrt_result gpu_trace_rays(vk_context *vk, const gpu_scene *scene, const gpu_trace_rays_params *params,
                            const vkrt_ray *rays, size_t count, vkrt_hit *out_hits);
+
+/* The wavefront's traversal passes (the lighting modes): a ray buffer on the device that
+ * shade.comp fills and trace.comp's wavefront variant traces, closest-hit or (params->any_hit)
+ * any-hit, its hits left on the device for the next stage (tri = triangle array index). */
+typedef struct gpu_wavefront_tracer gpu_wavefront_tracer;
+
+vkrt_result gpu_wavefront_tracer_create(vk_context *vk, const gpu_scene *scene, const gpu_trace_rays_params *params,
+                                        uint32_t capacity, gpu_wavefront_tracer **out);
+VkBuffer gpu_wavefront_rays(const gpu_wavefront_tracer *t);
+VkBuffer gpu_wavefront_hits(const gpu_wavefront_tracer *t);
+/* Traces the first `count` rays: one submission, and resume submissions while the loop budget
+ * leaves any unfinished. Adds the device time to *device_ms. */
+vkrt_result gpu_wavefront_trace(vk_context *vk, gpu_wavefront_tracer *t, const gpu_scene *scene, uint32_t count,
+                                double *device_ms);
+void gpu_wavefront_tracer_destroy(vk_context *vk, gpu_wavefront_tracer *t);
 
 #endif

@@ -99,7 +99,11 @@ static void encode_rgb8(const vkrt_image_view *im, uint8_t *out)
             heat_ramp(p[0] / heat_max, rgb);
             break;
         case VKRT_MODE_ALBEDO:
-            /* Linear reflectance, shown as an sRGB image shows colour. */
+        case VKRT_MODE_SHADED:
+        case VKRT_MODE_AO:
+        case VKRT_MODE_PATH:
+            /* Linear reflectance or radiance, shown as an sRGB image shows colour (radiance
+             * above 1 clips to white). */
             for (int k = 0; k < 3; k++) rgb[k] = srgb_encode(p[k]);
             break;
         case VKRT_MODE_UV:

@@ -95,8 +95,21 @@ static const char render_help[] =
     "options (defaults first):\n"
     "  -o, --output OUT          render.png; .png, .ppm (8-bit colour), .pfm (raw floats) or\n"
     "                            .hdr (raw values, Radiance RGBE)\n"
-    "  --mode normal|depth|heatmap|id|albedo|uv\n"
-    "                            albedo: the material's base colour; uv: texture coordinates\n"
+    "  --mode normal|depth|heatmap|id|albedo|uv|shaded|ao|path\n"
+    "                            albedo: the material's base colour; uv: texture coordinates;\n"
+    "                            shaded: direct light with hard shadows; ao: ambient occlusion;\n"
+    "                            path: path tracing (the lighting modes write linear radiance)\n"
+    "  --light dir:X,Y,Z:R,G,B   a directional light travelling along X,Y,Z with irradiance R,G,B\n"
+    "  --light point:X,Y,Z:R,G,B a point light at X,Y,Z with intensity R,G,B (repeatable, up to 64;\n"
+    "                            with no light, emitter or sky at all: a default key light and sky)\n"
+    "  --sky R,G,B[:R,G,B]       sky radiance: constant, or zenith:horizon gradient (black)\n"
+    "  --spp N                   samples per pixel (1 for shaded and ao, 16 for path)\n"
+    "  --target-error E          adaptive: a pixel stops once its relative standard error is at\n"
+    "                            most E (after 8 samples), or at --spp\n"
+    "  --ao-samples N            ao: rays per hit per sample (4)\n"
+    "  --ao-distance D           ao: occluders beyond D do not count (0.5)\n"
+    "  --bounces N               path: bounces after the primary hit (8)\n"
+    "  --seed N                  sampler seed (0); the same seed gives the same image\n"
     "  --heat nodes|leaves|tris  what heatmap counts per ray\n"
     "  --heat-max N              count at the top of the heat ramp (default: the image maximum)\n"
     "  --backend gpu|cpu         Vulkan compute, or the C reference tracer\n"
@@ -116,6 +129,7 @@ static const char render_help[] =
     "  --validation              enable the Vulkan validation layer; any message fails the run\n"
     "  --repeat N                render once to warm up (shader compilation), then N times, and\n"
     "                            report the median times\n"
+    "  -v, --verbose             also report what the lighting modes compiled out, and why\n"
     "  --counters                also report BVH boxes entered, leaves entered and triangle tests\n"
     "                            per ray (the GPU counts in a pipeline variant of its own)\n"
     "  -q, --quiet / -v, --verbose\n"
@@ -223,8 +237,11 @@ static void print_help(FILE *f, const char *command)
     fputs(help_footer, f);
 }
 
+#define MAX_CLI_LIGHTS 64
+
 typedef struct options {
     const char *command;
+    vkrt_light lights[MAX_CLI_LIGHTS];
     const char *input;
     const char *output;
     vkrt_context_desc context;
@@ -282,6 +299,42 @@ static bool parse_size(const char *s, uint32_t *w, uint32_t *h)
     return parse_u32(buf, w) && parse_u32(x + 1, h) && *w > 0 && *h > 0;
 }
 
+/* "dir:X,Y,Z:R,G,B" or "point:X,Y,Z:R,G,B". */
+static bool parse_light(const char *s, vkrt_light *out)
+{
+    const char *rest;
+    if (!strncmp(s, "dir:", 4)) out->type = VKRT_LIGHT_DIRECTIONAL, rest = s + 4;
+    else if (!strncmp(s, "point:", 6)) out->type = VKRT_LIGHT_POINT, rest = s + 6;
+    else return false;
+    const char *colon = strchr(rest, ':');
+    char vec[128];
+    if (!colon || (size_t)(colon - rest) >= sizeof vec) return false;
+    memcpy(vec, rest, (size_t)(colon - rest));
+    vec[colon - rest] = '\0';
+    return parse_vec3(vec, out->vector) && parse_vec3(colon + 1, out->color) && out->color[0] >= 0 &&
+           out->color[1] >= 0 && out->color[2] >= 0;
+}
+
+/* "R,G,B" (constant) or "R,G,B:R,G,B" (zenith:horizon). */
+static bool parse_sky(const char *s, vkrt_sky *out)
+{
+    const char *colon = strchr(s, ':');
+    char first[128];
+    size_t n = colon ? (size_t)(colon - s) : strlen(s);
+    if (n >= sizeof first) return false;
+    memcpy(first, s, n);
+    first[n] = '\0';
+    if (!parse_vec3(first, out->zenith)) return false;
+    if (colon) {
+        if (!parse_vec3(colon + 1, out->horizon)) return false;
+    } else {
+        memcpy(out->horizon, out->zenith, sizeof out->horizon);
+    }
+    for (int k = 0; k < 3; k++)
+        if (out->zenith[k] < 0 || out->horizon[k] < 0) return false;
+    return true;
+}
+
 static int usage_error(const char *fmt, const char *arg)
 {
     fprintf(stderr, "vkrt: ");
@@ -311,7 +364,43 @@ static int parse_args(int argc, char **argv, options *o)
             else if (!strcmp(value, "id")) o->render.mode = VKRT_MODE_ID;
             else if (!strcmp(value, "albedo")) o->render.mode = VKRT_MODE_ALBEDO;
             else if (!strcmp(value, "uv")) o->render.mode = VKRT_MODE_UV;
-            else return usage_error("unknown mode '%s' (normal, depth, heatmap, id, albedo, uv)", value);
+            else if (!strcmp(value, "shaded")) o->render.mode = VKRT_MODE_SHADED;
+            else if (!strcmp(value, "ao")) o->render.mode = VKRT_MODE_AO;
+            else if (!strcmp(value, "path")) o->render.mode = VKRT_MODE_PATH;
+            else return usage_error("unknown mode '%s' (normal, depth, heatmap, id, albedo, uv, shaded, ao, path)", value);
+        } else if (!strcmp(arg, "--light")) {
+            NEED_VALUE();
+            if (o->render.light_count == MAX_CLI_LIGHTS) return usage_error("more than %s lights", "64");
+            if (!parse_light(value, &o->lights[o->render.light_count]))
+                return usage_error("bad --light '%s' (want dir:X,Y,Z:R,G,B or point:X,Y,Z:R,G,B, colours >= 0)", value);
+            o->render.light_count++;
+            o->render.lights = o->lights;
+        } else if (!strcmp(arg, "--sky")) {
+            NEED_VALUE();
+            if (!parse_sky(value, &o->render.sky)) return usage_error("bad --sky '%s' (want R,G,B or R,G,B:R,G,B, >= 0)", value);
+        } else if (!strcmp(arg, "--spp")) {
+            NEED_VALUE();
+            if (!parse_u32(value, &o->render.spp) || !o->render.spp || o->render.spp > 65536)
+                return usage_error("bad --spp '%s' (1 to 65536)", value);
+        } else if (!strcmp(arg, "--target-error")) {
+            NEED_VALUE();
+            if (!parse_float(value, &o->render.target_error) || !(o->render.target_error > 0))
+                return usage_error("bad --target-error '%s' (a relative error > 0, e.g. 0.05)", value);
+        } else if (!strcmp(arg, "--ao-samples")) {
+            NEED_VALUE();
+            if (!parse_u32(value, &o->render.ao_samples) || !o->render.ao_samples || o->render.ao_samples > 256)
+                return usage_error("bad --ao-samples '%s' (1 to 256)", value);
+        } else if (!strcmp(arg, "--ao-distance")) {
+            NEED_VALUE();
+            if (!parse_float(value, &o->render.ao_distance) || !(o->render.ao_distance > 0))
+                return usage_error("bad --ao-distance '%s' (> 0)", value);
+        } else if (!strcmp(arg, "--bounces")) {
+            NEED_VALUE();
+            if (!parse_u32(value, &o->render.max_bounces) || !o->render.max_bounces || o->render.max_bounces > 64)
+                return usage_error("bad --bounces '%s' (1 to 64)", value);
+        } else if (!strcmp(arg, "--seed")) {
+            NEED_VALUE();
+            if (!parse_u32(value, &o->render.seed)) return usage_error("bad --seed '%s'", value);
         } else if (!strcmp(arg, "--heat")) {
             NEED_VALUE();
             if (!strcmp(value, "nodes")) o->render.heat = VKRT_HEAT_NODES;
@@ -439,7 +528,7 @@ static int check_validation(vkrt_context *ctx, const options *o)
 
 static const char *mode_name(vkrt_mode m)
 {
-    static const char *names[] = { "normal", "normal", "depth", "heatmap", "id", "albedo", "uv" };
+    static const char *names[] = { "normal", "normal", "depth", "heatmap", "id", "albedo", "uv", "shaded", "ao", "path" };
     return names[m];
 }
 
@@ -505,6 +594,36 @@ static bool on_progress(void *user, const char *stage, float fraction)
     b->shown = true;
     b->drawn_ms = t;
     return true;
+}
+
+/* Why each lighting feature was or was not compiled in (-v). */
+static void report_skips(const vkrt_scene *scene, const vkrt_render_desc *d, const vkrt_render_stats *stats)
+{
+    if (stats->naive_by_cost)
+        fprintf(stderr, "vkrt: traversal: naive, chosen by the cost model (the BVH's SAH cost is not below the triangle count)\n");
+    if (d->mode < VKRT_MODE_SHADED) {
+        fprintf(stderr, "vkrt: skipped: lights, shadows and random numbers (a primary mode); surfaces %s\n",
+                d->mode == VKRT_MODE_ALBEDO || d->mode == VKRT_MODE_UV ? "read" : "not uploaded (this mode does not read them)");
+        return;
+    }
+    vkrt_scene_stats ss;
+    vkrt_scene_stats_get(scene, &ss);
+    const struct {
+        uint32_t bit;
+        const char *why_not;
+    } reasons[] = {
+        { VKRT_FEATURE_TEXTURES, ss.textures ? "this mode reads no texture" : "no material has a texture" },
+        { VKRT_FEATURE_PUNCTUAL, d->mode == VKRT_MODE_AO ? "ao ignores lights" : "no point or directional light" },
+        { VKRT_FEATURE_EMITTERS, d->mode == VKRT_MODE_AO ? "ao ignores emission" : "no emissive triangle" },
+        { VKRT_FEATURE_SKY, d->mode == VKRT_MODE_AO ? "ao ignores the sky" : "the sky is black" },
+        { VKRT_FEATURE_SPECULAR, d->mode == VKRT_MODE_AO ? "ao reads no material" : "no material is metallic" },
+        { VKRT_FEATURE_RANDOM, "shaded with only point and directional lights is exact in one sample" },
+        { VKRT_FEATURE_ADAPTIVE, d->target_error > 0 ? "the render needs no sampling" : "no --target-error" },
+    };
+    for (size_t i = 0; i < sizeof reasons / sizeof reasons[0]; i++) {
+        if (stats->features & reasons[i].bit) fprintf(stderr, "vkrt: compiled in: %s\n", vkrt_feature_name(reasons[i].bit));
+        else fprintf(stderr, "vkrt: skipped: %s (%s)\n", vkrt_feature_name(reasons[i].bit), reasons[i].why_not);
+    }
 }
 
 static int command_render(options *o)
@@ -573,6 +692,10 @@ static int command_render(options *o)
                 o->input ? o->input : "built-in scene", ss.triangles, w, h, mode_name(o->render.mode),
                 vkrt_context_device_name(ctx), stats.trace_ms, stats.total_ms,
                 o->repeat ? " (median after a warm-up)" : "", o->output);
+        if (o->render.mode >= VKRT_MODE_SHADED)
+            fprintf(stderr, "vkrt: %.2f samples per pixel, %" PRIu64 " shadow rays, %" PRIu64 " bounce rays, %u lights\n",
+                    (double)stats.samples / ((double)w * h), stats.shadow_rays, stats.bounce_rays, stats.lights);
+        if (verbosity >= 2) report_skips(scene, &o->render, &stats);
         if (o->render.traversal_counters) {
             double rays = (double)stats.rays;
             fprintf(stderr, "vkrt: per ray: %.2f boxes entered, %.2f leaves entered, %.2f triangle tests\n",

@@ -4,6 +4,8 @@
 #define VKRT_SHADERS_EMBEDDED_H
 
 extern const char vkrt_shader_trace_comp[];
+/* The lighting modes' wavefront stages. */
+extern const char vkrt_shader_shade_comp[];
 /* Test only: copies every shared-struct field out, to check the std430 layout on the device. */
 extern const char vkrt_shader_layout_check_comp[];
 /* Test only: runs ray_offset() of trace_common.glsl, to compare it with the C one bit for bit. */

@@ -9,6 +9,9 @@ typedef struct trace_counts {
     uint64_t nodes;  /* BVH boxes entered, the root's included */
     uint64_t leaves; /* of those, leaves */
     uint64_t tris;   /* ray-triangle tests (naive traversal: every triangle, every ray) */
+    uint64_t samples;     /* lighting modes: samples taken */
+    uint64_t shadow_rays; /* lighting modes: any-hit rays traced */
+    uint64_t bounce_rays; /* lighting modes: closest-hit rays after the primary ones */
 } trace_counts;
 
 #endif

@@ -8,8 +8,10 @@
 #include "shaders_embedded.h"
 
 /* Images: (5 modes + 3 heat kinds) x 2 traversals x 2 intersectors x counters on or off x
- * alpha test on or off; rays: 2 x 2 x 2 more. */
-#define MAX_VARIANTS 192
+ * alpha test on or off; rays: 2 x 2 x 2 more, each with any-hit on or off, and the wavefront's. */
+#define MAX_VARIANTS 256
+/* Stages x modes x the feature combinations one context meets in practice. */
+#define MAX_SHADE_VARIANTS 256
 
 typedef struct vk_pipelines {
     VkShaderModule trace_module;
@@ -18,6 +20,12 @@ typedef struct vk_pipelines {
     uint32_t count;
     vk_trace_variant variants[MAX_VARIANTS];
     VkPipeline pipelines[MAX_VARIANTS];
+    VkShaderModule shade_module;       /* compiled on the first lighting render */
+    VkDescriptorSetLayout shade_set_layout;
+    VkPipelineLayout shade_layout;
+    uint32_t shade_count;
+    vk_shade_variant shade_variants[MAX_SHADE_VARIANTS];
+    VkPipeline shade_pipelines[MAX_SHADE_VARIANTS];
 } vk_pipelines;
 
 vkrt_result vk_compile_glsl(core *c, const char *name, const char *source, uint32_t **out_words, size_t *out_count)
@@ -76,40 +84,48 @@ done:
     return r;
 }
 
-static vkrt_result create_layouts(vk_context *vk, vk_pipelines *p)
+/* One set of `count` bindings, storage buffers but `image_binding` (UINT32_MAX: none), and a
+ * pipeline layout with the push constants. */
+static vkrt_result create_layout_pair(vk_context *vk, uint32_t count, uint32_t image_binding,
+                                      VkDescriptorSetLayout *out_set, VkPipelineLayout *out_layout)
 {
-    VkDescriptorSetLayoutBinding bindings[VKRT_BINDING_COUNT];
-    for (uint32_t i = 0; i < VKRT_BINDING_COUNT; i++)
+    VkDescriptorSetLayoutBinding bindings[VKRT_BINDING_COUNT > VKRT_SHADE_BINDING_COUNT ? VKRT_BINDING_COUNT
+                                                                                         : VKRT_SHADE_BINDING_COUNT];
+    for (uint32_t i = 0; i < count; i++)
         bindings[i] = (VkDescriptorSetLayoutBinding){
-            i, i == VKRT_BINDING_IMAGE ? VK_DESCRIPTOR_TYPE_STORAGE_IMAGE : VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1,
+            i, i == image_binding ? VK_DESCRIPTOR_TYPE_STORAGE_IMAGE : VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1,
             VK_SHADER_STAGE_COMPUTE_BIT, NULL };
     VkDescriptorSetLayoutCreateInfo set_info = {
         .sType = VK_STRUCTURE_TYPE_DESCRIPTOR_SET_LAYOUT_CREATE_INFO,
-        .bindingCount = sizeof bindings / sizeof bindings[0],
+        .bindingCount = count,
         .pBindings = bindings,
     };
-    VkResult res = vkCreateDescriptorSetLayout(vk->device, &set_info, NULL, &p->set_layout);
+    VkResult res = vkCreateDescriptorSetLayout(vk->device, &set_info, NULL, out_set);
     if (res != VK_SUCCESS) return vk_fail(vk, res, "vkCreateDescriptorSetLayout");
     VkPushConstantRange push = { .stageFlags = VK_SHADER_STAGE_COMPUTE_BIT, .size = sizeof(vkrt_gpu_push) };
     VkPipelineLayoutCreateInfo layout_info = {
         .sType = VK_STRUCTURE_TYPE_PIPELINE_LAYOUT_CREATE_INFO,
         .setLayoutCount = 1,
-        .pSetLayouts = &p->set_layout,
+        .pSetLayouts = out_set,
         .pushConstantRangeCount = 1,
         .pPushConstantRanges = &push,
     };
-    res = vkCreatePipelineLayout(vk->device, &layout_info, NULL, &p->layout);
+    res = vkCreatePipelineLayout(vk->device, &layout_info, NULL, out_layout);
     if (res != VK_SUCCESS) return vk_fail(vk, res, "vkCreatePipelineLayout");
     return VKRT_OK;
+}
+
+static vkrt_result create_layouts(vk_context *vk, vk_pipelines *p)
+{
+    return create_layout_pair(vk, VKRT_BINDING_COUNT, VKRT_BINDING_IMAGE, &p->set_layout, &p->layout);
 }
 
 /* trace.comp with "#define VKRT_HAS_FLOAT64" after its #version line where the device has
  * doubles: the Float64 capability may only appear in a module for a device that enabled it,
  * and a specialization constant cannot remove a capability. NULL when out of memory. */
-static char *trace_source(vk_context *vk)
+static char *shader_source(vk_context *vk, const char *source)
 {
     static const char define[] = "#define VKRT_HAS_FLOAT64 1\n";
-    const char *source = vkrt_shader_trace_comp;
     const char *version = strstr(source, "#version");
     const char *after = version ? strchr(version, '\n') : NULL;
     size_t head = after && vk->float64 ? (size_t)(after + 1 - source) : 0;
@@ -122,13 +138,13 @@ static char *trace_source(vk_context *vk)
     return text;
 }
 
-static vkrt_result create_module(vk_context *vk, vk_pipelines *p)
+static vkrt_result create_module(vk_context *vk, const char *name, const char *text, VkShaderModule *out)
 {
     uint32_t *words;
     size_t count;
-    char *source = trace_source(vk);
-    if (!source) return core_fail(vk->core, VKRT_ERROR_OUT_OF_MEMORY, "out of memory for the trace shader source");
-    vkrt_result r = vk_compile_glsl(vk->core, "trace.comp", source, &words, &count);
+    char *source = shader_source(vk, text);
+    if (!source) return core_fail(vk->core, VKRT_ERROR_OUT_OF_MEMORY, "out of memory for the source of %s", name);
+    vkrt_result r = vk_compile_glsl(vk->core, name, source, &words, &count);
     core_free(vk->core, source);
     if (r != VKRT_OK) return r;
     VkShaderModuleCreateInfo info = {
@@ -136,7 +152,7 @@ static vkrt_result create_module(vk_context *vk, vk_pipelines *p)
         .codeSize = count * sizeof *words,
         .pCode = words,
     };
-    VkResult res = vkCreateShaderModule(vk->device, &info, NULL, &p->trace_module);
+    VkResult res = vkCreateShaderModule(vk->device, &info, NULL, out);
     core_free(vk->core, words);
     if (res != VK_SUCCESS) return vk_fail(vk, res, "vkCreateShaderModule");
     return VKRT_OK;
@@ -149,7 +165,7 @@ static vkrt_result ensure_base(vk_context *vk)
     if (!p) return core_fail(vk->core, VKRT_ERROR_OUT_OF_MEMORY, "out of memory for pipelines");
     vk->pipelines = p;
     vkrt_result r = create_layouts(vk, p);
-    if (r == VKRT_OK) r = create_module(vk, p);
+    if (r == VKRT_OK) r = create_module(vk, "trace.comp", vkrt_shader_trace_comp, &p->trace_module);
     if (r != VKRT_OK) vk_pipelines_destroy(vk);
     return r;
 }
@@ -178,6 +194,7 @@ vkrt_result vk_trace_pipeline_get(vk_context *vk, vk_trace_variant variant, vk_t
         { VKRT_SPEC_BUDGET, offsetof(vk_trace_variant, budget), sizeof(uint32_t) },
         { VKRT_SPEC_COUNTERS, offsetof(vk_trace_variant, counters), sizeof(uint32_t) },
         { VKRT_SPEC_ALPHA, offsetof(vk_trace_variant, alpha), sizeof(uint32_t) },
+        { VKRT_SPEC_ANYHIT, offsetof(vk_trace_variant, anyhit), sizeof(uint32_t) },
     };
     VkSpecializationInfo spec = {
         .mapEntryCount = sizeof entries / sizeof entries[0],
@@ -206,11 +223,68 @@ vkrt_result vk_trace_pipeline_get(vk_context *vk, vk_trace_variant variant, vk_t
     return VKRT_OK;
 }
 
+vkrt_result vk_shade_pipeline_get(vk_context *vk, vk_shade_variant variant, vk_trace_pipeline *out)
+{
+    vkrt_result r = ensure_base(vk);
+    if (r != VKRT_OK) return r;
+    vk_pipelines *p = vk->pipelines;
+    if (!p->shade_module) {
+        if (!p->shade_layout &&
+            (r = create_layout_pair(vk, VKRT_SHADE_BINDING_COUNT, UINT32_MAX, &p->shade_set_layout, &p->shade_layout)) !=
+                VKRT_OK)
+            return r;
+        if ((r = create_module(vk, "shade.comp", vkrt_shader_shade_comp, &p->shade_module)) != VKRT_OK) return r;
+    }
+    out->set_layout = p->shade_set_layout;
+    out->layout = p->shade_layout;
+    for (uint32_t i = 0; i < p->shade_count; i++) {
+        if (memcmp(&p->shade_variants[i], &variant, sizeof variant) == 0) {
+            out->pipeline = p->shade_pipelines[i];
+            return VKRT_OK;
+        }
+    }
+    if (p->shade_count == MAX_SHADE_VARIANTS) return core_fail(vk->core, VKRT_ERROR_LIMIT, "too many shade pipeline variants");
+    const VkSpecializationMapEntry entries[] = {
+        { VKRT_SPEC_SHADE_STAGE, offsetof(vk_shade_variant, stage), sizeof(uint32_t) },
+        { VKRT_SPEC_SHADE_MODE, offsetof(vk_shade_variant, mode), sizeof(uint32_t) },
+        { VKRT_SPEC_SHADE_FEATURES, offsetof(vk_shade_variant, features), sizeof(uint32_t) },
+    };
+    VkSpecializationInfo spec = {
+        .mapEntryCount = sizeof entries / sizeof entries[0],
+        .pMapEntries = entries,
+        .dataSize = sizeof variant,
+        .pData = &variant,
+    };
+    VkComputePipelineCreateInfo info = {
+        .sType = VK_STRUCTURE_TYPE_COMPUTE_PIPELINE_CREATE_INFO,
+        .stage = {
+            .sType = VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO,
+            .stage = VK_SHADER_STAGE_COMPUTE_BIT,
+            .module = p->shade_module,
+            .pName = "main",
+            .pSpecializationInfo = &spec,
+        },
+        .layout = p->shade_layout,
+    };
+    VkPipeline pipeline;
+    VkResult res = vkCreateComputePipelines(vk->device, vk->pipeline_cache, 1, &info, NULL, &pipeline);
+    if (res != VK_SUCCESS) return vk_fail(vk, res, "vkCreateComputePipelines (shade)");
+    vk_label(vk, VK_OBJECT_TYPE_PIPELINE, (uint64_t)pipeline, "vkrt shade");
+    p->shade_variants[p->shade_count] = variant;
+    p->shade_pipelines[p->shade_count++] = pipeline;
+    out->pipeline = pipeline;
+    return VKRT_OK;
+}
+
 void vk_pipelines_destroy(vk_context *vk)
 {
     vk_pipelines *p = vk->pipelines;
     if (!p) return;
     for (uint32_t i = 0; i < p->count; i++) vkDestroyPipeline(vk->device, p->pipelines[i], NULL);
+    for (uint32_t i = 0; i < p->shade_count; i++) vkDestroyPipeline(vk->device, p->shade_pipelines[i], NULL);
+    if (p->shade_module) vkDestroyShaderModule(vk->device, p->shade_module, NULL);
+    if (p->shade_layout) vkDestroyPipelineLayout(vk->device, p->shade_layout, NULL);
+    if (p->shade_set_layout) vkDestroyDescriptorSetLayout(vk->device, p->shade_set_layout, NULL);
     if (p->trace_module) vkDestroyShaderModule(vk->device, p->trace_module, NULL);
     if (p->layout) vkDestroyPipelineLayout(vk->device, p->layout, NULL);
     if (p->set_layout) vkDestroyDescriptorSetLayout(vk->device, p->set_layout, NULL);

@@ -19,6 +19,7 @@ typedef struct vk_trace_variant {
     uint32_t budget;     /* BVH loop iterations per dispatch, 0: unlimited (VKRT_SPEC_BUDGET) */
     uint32_t counters;   /* 1: write each pixel's traversal counts (VKRT_SPEC_COUNTERS) */
     uint32_t alpha;      /* 1: alpha-test hits (VKRT_SPEC_ALPHA) */
+    uint32_t anyhit;     /* 1: stop at the first hit (VKRT_SPEC_ANYHIT) */
 } vk_trace_variant;
 
 typedef struct vk_trace_pipeline {
@@ -30,6 +31,16 @@ typedef struct vk_trace_pipeline {
 /* Returns the pipeline for a variant, compiling the shader and creating the layouts the first
  * time. A shader that fails to compile is VKRT_ERROR_VULKAN with glslang's log as detail. */
 vkrt_result vk_trace_pipeline_get(vk_context *vk, vk_trace_variant variant, vk_trace_pipeline *out);
+
+/* A pipeline of shade.comp (the lighting modes' stages). */
+typedef struct vk_shade_variant {
+    uint32_t stage;      /* VKRT_STAGE_* */
+    uint32_t mode;       /* VKRT_GPU_MODE_SHADED, _AO or _PATH */
+    uint32_t features;   /* VKRT_GPU_FEATURE_* */
+} vk_shade_variant;
+
+/* As vk_trace_pipeline_get, for shade.comp (its own module, set layout and pipeline layout). */
+vkrt_result vk_shade_pipeline_get(vk_context *vk, vk_shade_variant variant, vk_trace_pipeline *out);
 
 /* GLSL -> SPIR-V for a compute shader. On success *out_words is allocated with the core
  * allocator (the caller frees it) and *out_count holds its 32-bit words. */
