@@ -745,7 +745,8 @@ static void gpu_traversal_counters_sum_the_heatmap(void)
     const uint32_t w = 96, h = 64;
     for (int b = 0; b < 3; b++) {
         vkrt_scene *sg = NULL, *sc = NULL;
-        vkrt_render_desc d = { .width = w, .height = h };
+        /* BVH named: the default traversal of the leaf stack (one leaf) is naive by the cost model. */
+        vkrt_render_desc d = { .width = w, .height = h, .traversal = VKRT_TRAVERSAL_BVH };
         float *pos = NULL;
         uint32_t *idx = NULL;
         if (b < 2) {
@@ -756,7 +757,7 @@ static void gpu_traversal_counters_sum_the_heatmap(void)
             make_leaf_stack(&pos, &idx);
             sg = mesh_scene(gpu, pos, STACK_TRIS * 3, idx, STACK_TRIS, VKRT_BVH_BUILDER_DEFAULT);
             sc = mesh_scene(cpu, pos, STACK_TRIS * 3, idx, STACK_TRIS, VKRT_BVH_BUILDER_DEFAULT);
-            d = (vkrt_render_desc){ .width = 9, .height = 7,
+            d = (vkrt_render_desc){ .width = 9, .height = 7, .traversal = VKRT_TRAVERSAL_BVH,
                                     .camera = { .eye = { -0.2f, 0, 3 }, .target = { -0.2f, 0, 0 }, .fov_y_degrees = 10 } };
         }
         for (int k = 0; sg && sc && k < 2; k++) {
