@@ -46,6 +46,41 @@ if [ -f "$tmp/builtin.png" ] && [ "$(png_size "$tmp/builtin.png")" = "96x64" ]; 
 for mode in normal depth heatmap id albedo uv; do
   expect "render bunny --mode $mode" 0 "$vkrt" render "$models/meshes/bunny.obj" --mode "$mode" -o "$tmp/bunny_$mode.png" --size 48x48
 done
+# --- lighting modes --------------------------------------------------------------------
+for mode in shaded ao path; do
+  expect "render --mode $mode" 0 "$vkrt" render --mode "$mode" --spp 2 -o "$tmp/light_$mode.png" --size 32x24
+done
+expect "path with lights, sky, seed and adaptive sampling" 0 "$vkrt" render "$models/meshes/bunny.obj" --mode path \
+  --light dir:-1,-2,-1:2,2,2 --light point:0.5,0.8,0.8:1,0.9,0.8 --sky 0.5,0.6,0.8:0.1,0.1,0.1 --spp 16 \
+  --target-error 0.1 --bounces 4 --seed 7 -o "$tmp/lit.pfm" --size 24x24
+if grep -qE "samples per pixel, [0-9]+ shadow rays, [0-9]+ bounce rays, 2 lights" "$tmp/err"; then ok "lighting render reports samples, rays and lights"
+else bad "lighting render reports samples, rays and lights"; fi
+# The same seed on the two backends: the same sample counts, and pixels that agree.
+"$vkrt" render --mode ao --spp 4 -o "$tmp/ao_gpu.pfm" --size 24x16 >"$tmp/out" 2>"$tmp/err"
+gpu_line=$(grep "samples per pixel" "$tmp/err")
+"$vkrt" render --mode ao --spp 4 --backend cpu -o "$tmp/ao_cpu.pfm" --size 24x16 >"$tmp/out" 2>"$tmp/err"
+cpu_line=$(grep "samples per pixel" "$tmp/err")
+if [ -n "$gpu_line" ] && [ "$gpu_line" = "$cpu_line" ] && python3 - "$tmp/ao_gpu.pfm" "$tmp/ao_cpu.pfm" <<'PY'
+import struct, sys
+def read(p):
+    f = open(p, "rb"); f.readline(); w, h = map(int, f.readline().split()); f.readline()
+    return struct.unpack("<%df" % (w * h * 3), f.read())
+a, b = read(sys.argv[1]), read(sys.argv[2])
+sys.exit(0 if len(a) == len(b) and max(abs(x - y) for x, y in zip(a, b)) < 1e-4 else 1)
+PY
+then ok "ao on GPU and CPU: same samples and pixels"; else bad "ao on GPU and CPU: same samples and pixels ('$gpu_line' / '$cpu_line')"; fi
+"$vkrt" render --mode shaded -v -o "$tmp/v.png" --size 16x16 >"$tmp/out" 2>"$tmp/err"
+if grep -q "skipped: textures (no material has a texture)" "$tmp/err" && grep -q "skipped: random numbers" "$tmp/err" &&
+   grep -q "compiled in: point and directional lights" "$tmp/err"; then ok "--verbose reports what was skipped and why"
+else bad "--verbose reports what was skipped and why"; fi
+expect "bad --light" 2 "$vkrt" render --mode shaded --light spot:0,1,0:1,1,1 -o "$tmp/x.png" --size 8x8
+expect "negative --light colour" 2 "$vkrt" render --mode shaded --light point:0,1,0:-1,1,1 -o "$tmp/x.png" --size 8x8
+expect "bad --sky" 2 "$vkrt" render --mode path --sky 1,1 -o "$tmp/x.png" --size 8x8
+expect "bad --spp" 2 "$vkrt" render --mode path --spp 0 -o "$tmp/x.png" --size 8x8
+expect "bad --target-error" 2 "$vkrt" render --mode path --target-error -1 -o "$tmp/x.png" --size 8x8
+expect "directional light of zero direction" 2 "$vkrt" render --mode shaded --light dir:0,0,0:1,1,1 -o "$tmp/zero.png" --size 8x8
+[ ! -e "$tmp/zero.png" ] && ok "no file for a refused light" || bad "no file for a refused light"
+
 expect "render heatmap of leaves with the midpoint BVH" 0 "$vkrt" render "$models/meshes/bunny.obj" --mode heatmap --heat leaves --bvh midpoint -o "$tmp/heat.png" --size 32x32
 # --counters: per-ray traversal work, the same on both backends for this small render
 "$vkrt" render "$models/meshes/bunny.obj" --counters -o "$tmp/c.png" --size 32x32 >"$tmp/out" 2>"$tmp/err"

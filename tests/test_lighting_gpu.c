@@ -148,6 +148,24 @@ static void gpu_specialisation_changes_no_pixel(void)
     vkrt_scene_destroy(s);
 }
 
+/* Naive traversal of the wavefront's closest-hit and any-hit passes (chunked over the triangles
+ * on the device) renders the BVH's image, bit for bit. */
+static void gpu_lighting_bvh_and_naive_give_identical_images(void)
+{
+    vkrt_scene *s = builtin(gpu);
+    const vkrt_mode modes[2] = { VKRT_MODE_SHADED, VKRT_MODE_PATH };
+    for (int m = 0; s && m < 2; m++) {
+        vkrt_render_desc d = { .width = 16, .height = 12, .mode = modes[m], .spp = 2, .traversal = VKRT_TRAVERSAL_BVH };
+        float *a = test_render(gpu, s, d, NULL, NULL);
+        d.traversal = VKRT_TRAVERSAL_NAIVE;
+        float *b = test_render(gpu, s, d, NULL, NULL);
+        if (a && b) CHECK_MSG(memcmp(a, b, 16 * 12 * 4 * sizeof *a) == 0, "mode %d: naive image differs", (int)modes[m]);
+        free(a);
+        free(b);
+    }
+    vkrt_scene_destroy(s);
+}
+
 /* Adaptive sampling on the device makes the CPU's decisions: the same samples per pixel. */
 static void gpu_adaptive_sampling_matches_cpu(void)
 {
@@ -251,6 +269,7 @@ int main(void)
     RUN(gpu_lighting_matches_cpu_statistically);
     RUN(gpu_furnace_converges_to_the_geometric_series);
     RUN(gpu_specialisation_changes_no_pixel);
+    RUN(gpu_lighting_bvh_and_naive_give_identical_images);
     RUN(gpu_adaptive_sampling_matches_cpu);
     RUN(gpu_any_hit_queries_agree_with_closest_hit);
     RUN(gpu_shadow_rays_beyond_the_loop_limit_match_cpu);
