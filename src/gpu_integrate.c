@@ -94,11 +94,17 @@ static vkrt_result wave_create(wave *w, uint32_t slots)
 {
     vk_context *vk = w->vk;
     const gpu_integrate_params *p = w->params;
+    /* Host memory before the first pipeline (see gpu_wavefront_tracer_alloc). */
+    w->closest = gpu_wavefront_tracer_alloc(vk);
+    w->shadow = gpu_wavefront_tracer_alloc(vk);
+    if (!w->closest || !w->shadow) return core_fail(vk->core, VKRT_ERROR_OUT_OF_MEMORY, "out of memory for the wavefront");
+    vk_trace_pipeline any;
+    vkrt_result r = vk_shade_pipeline_get(vk, (vk_shade_variant){ VKRT_STAGE_CAMERA, p->mode, p->features }, &any);
     gpu_trace_rays_params trace = { .traversal = p->traversal, .intersector = p->intersector,
                                     .alpha_tested = p->alpha_tested };
-    vkrt_result r = gpu_wavefront_tracer_create(vk, w->scene, &trace, slots, &w->closest);
+    if (r == VKRT_OK) r = gpu_wavefront_tracer_init(vk, w->closest, w->scene, &trace, slots);
     trace.any_hit = true;
-    if (r == VKRT_OK) r = gpu_wavefront_tracer_create(vk, w->scene, &trace, slots, &w->shadow);
+    if (r == VKRT_OK) r = gpu_wavefront_tracer_init(vk, w->shadow, w->scene, &trace, slots);
     const VkBufferUsageFlags storage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT;
     if (r == VKRT_OK)
         r = vk_buffer_create(vk, (VkDeviceSize)slots * sizeof(vkrt_gpu_path), storage, VK_MEMORY_DEVICE, "vkrt paths",
@@ -123,8 +129,6 @@ static vkrt_result wave_create(wave *w, uint32_t slots)
         const wave_counters zero = { 0 };
         r = vk_buffer_upload(vk, &w->counters, &zero, sizeof zero);
     }
-    vk_trace_pipeline any;
-    if (r == VKRT_OK) r = vk_shade_pipeline_get(vk, (vk_shade_variant){ VKRT_STAGE_CAMERA, p->mode, p->features }, &any);
     if (r == VKRT_OK) {
         w->set_layout = any.set_layout;
         w->layout = any.layout;

@@ -692,10 +692,14 @@ struct gpu_wavefront_tracer {
     uint32_t capacity;
 };
 
-vkrt_result gpu_wavefront_tracer_create(vk_context *vk, const gpu_scene *scene, const gpu_trace_rays_params *params,
-                                        uint32_t capacity, gpu_wavefront_tracer **out)
+gpu_wavefront_tracer *gpu_wavefront_tracer_alloc(vk_context *vk)
 {
-    *out = NULL;
+    return core_calloc_array(vk->core, 1, sizeof(gpu_wavefront_tracer));
+}
+
+vkrt_result gpu_wavefront_tracer_init(vk_context *vk, gpu_wavefront_tracer *t, const gpu_scene *scene,
+                                      const gpu_trace_rays_params *params, uint32_t capacity)
+{
     const bool naive = params->traversal == VKRT_TRAVERSAL_NAIVE;
     vk_trace_variant variant = {
         .mode = VKRT_GPU_MODE_ID,
@@ -707,8 +711,6 @@ vkrt_result gpu_wavefront_tracer_create(vk_context *vk, const gpu_scene *scene, 
         .alpha = params->alpha_tested,
         .anyhit = params->any_hit,
     };
-    gpu_wavefront_tracer *t = core_calloc_array(vk->core, 1, sizeof *t);
-    if (!t) return core_fail(vk->core, VKRT_ERROR_OUT_OF_MEMORY, "out of memory for a wavefront tracer");
     vkrt_result r = vk_trace_pipeline_get(vk, variant, &t->pipe);
     t->naive = naive;
     t->budget = variant.budget != 0;
@@ -717,12 +719,7 @@ vkrt_result gpu_wavefront_tracer_create(vk_context *vk, const gpu_scene *scene, 
     if (r == VKRT_OK)
         r = create_render_objects(vk, scene, t->pipe.set_layout, 1, 1, capacity, capacity, t->budget ? capacity : 0, 0,
                                   &t->o);
-    if (r != VKRT_OK) {
-        gpu_wavefront_tracer_destroy(vk, t);
-        return r;
-    }
-    *out = t;
-    return VKRT_OK;
+    return r;
 }
 
 VkBuffer gpu_wavefront_rays(const gpu_wavefront_tracer *t)

@@ -80,14 +80,19 @@ vkrt_result gpu_trace_rays(vk_context *vk, const gpu_scene *scene, const gpu_tra
  * any-hit, its hits left on the device for the next stage (tri = triangle array index). */
 typedef struct gpu_wavefront_tracer gpu_wavefront_tracer;
 
-vkrt_result gpu_wavefront_tracer_create(vk_context *vk, const gpu_scene *scene, const gpu_trace_rays_params *params,
-                                        uint32_t capacity, gpu_wavefront_tracer **out);
+/* The host memory first (NULL when out of it), the device objects next: a caller allocates
+ * everything it needs before anything creates the context's pipelines, so a failed
+ * allocation leaves nothing behind. */
+gpu_wavefront_tracer *gpu_wavefront_tracer_alloc(vk_context *vk);
+/* On failure the caller still destroys t. */
+vkrt_result gpu_wavefront_tracer_init(vk_context *vk, gpu_wavefront_tracer *t, const gpu_scene *scene,
+                                      const gpu_trace_rays_params *params, uint32_t capacity);
 VkBuffer gpu_wavefront_rays(const gpu_wavefront_tracer *t);
 VkBuffer gpu_wavefront_hits(const gpu_wavefront_tracer *t);
 /* Traces the first `count` rays: one submission, and resume submissions while the loop budget
  * leaves any unfinished. Adds the device time to *device_ms. */
 vkrt_result gpu_wavefront_trace(vk_context *vk, gpu_wavefront_tracer *t, const gpu_scene *scene, uint32_t count,
                                 double *device_ms);
-void gpu_wavefront_tracer_destroy(vk_context *vk, gpu_wavefront_tracer *t);
+void gpu_wavefront_tracer_destroy(vk_context *vk, gpu_wavefront_tracer *t); /* NULL: no-op */
 
 #endif

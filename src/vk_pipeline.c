@@ -138,15 +138,19 @@ static char *shader_source(vk_context *vk, const char *source)
     return text;
 }
 
-static vkrt_result create_module(vk_context *vk, const char *name, const char *text, VkShaderModule *out)
+/* GLSL (the device's flavour, shader_source) -> SPIR-V words, allocated with the core allocator. */
+static vkrt_result compile_shader(vk_context *vk, const char *name, const char *text, uint32_t **out_words, size_t *out_count)
 {
-    uint32_t *words;
-    size_t count;
     char *source = shader_source(vk, text);
     if (!source) return core_fail(vk->core, VKRT_ERROR_OUT_OF_MEMORY, "out of memory for the source of %s", name);
-    vkrt_result r = vk_compile_glsl(vk->core, name, source, &words, &count);
+    vkrt_result r = vk_compile_glsl(vk->core, name, source, out_words, out_count);
     core_free(vk->core, source);
-    if (r != VKRT_OK) return r;
+    return r;
+}
+
+/* A shader module from SPIR-V words; the words are freed either way. */
+static vkrt_result module_from_words(vk_context *vk, uint32_t *words, size_t count, VkShaderModule *out)
+{
     VkShaderModuleCreateInfo info = {
         .sType = VK_STRUCTURE_TYPE_SHADER_MODULE_CREATE_INFO,
         .codeSize = count * sizeof *words,
@@ -156,6 +160,15 @@ static vkrt_result create_module(vk_context *vk, const char *name, const char *t
     core_free(vk->core, words);
     if (res != VK_SUCCESS) return vk_fail(vk, res, "vkCreateShaderModule");
     return VKRT_OK;
+}
+
+static vkrt_result create_module(vk_context *vk, const char *name, const char *text, VkShaderModule *out)
+{
+    uint32_t *words;
+    size_t count;
+    vkrt_result r = compile_shader(vk, name, text, &words, &count);
+    if (r != VKRT_OK) return r;
+    return module_from_words(vk, words, count, out);
 }
 
 static vkrt_result ensure_base(vk_context *vk)
@@ -225,15 +238,26 @@ vkrt_result vk_trace_pipeline_get(vk_context *vk, vk_trace_variant variant, vk_t
 
 vkrt_result vk_shade_pipeline_get(vk_context *vk, vk_shade_variant variant, vk_trace_pipeline *out)
 {
-    vkrt_result r = ensure_base(vk);
-    if (r != VKRT_OK) return r;
+    /* shade.comp is compiled before the shared state is made, so a host allocation that fails
+     * leaves nothing behind: after ensure_base only Vulkan objects are created. */
+    uint32_t *words = NULL;
+    size_t count = 0;
+    vkrt_result r = VKRT_OK;
+    if (!vk->pipelines || !vk->pipelines->shade_module)
+        if ((r = compile_shader(vk, "shade.comp", vkrt_shader_shade_comp, &words, &count)) != VKRT_OK) return r;
+    if ((r = ensure_base(vk)) != VKRT_OK) {
+        core_free(vk->core, words);
+        return r;
+    }
     vk_pipelines *p = vk->pipelines;
     if (!p->shade_module) {
         if (!p->shade_layout &&
             (r = create_layout_pair(vk, VKRT_SHADE_BINDING_COUNT, UINT32_MAX, &p->shade_set_layout, &p->shade_layout)) !=
-                VKRT_OK)
+                VKRT_OK) {
+            core_free(vk->core, words);
             return r;
-        if ((r = create_module(vk, "shade.comp", vkrt_shader_shade_comp, &p->shade_module)) != VKRT_OK) return r;
+        }
+        if ((r = module_from_words(vk, words, count, &p->shade_module)) != VKRT_OK) return r;
     }
     out->set_layout = p->shade_set_layout;
     out->layout = p->shade_layout;

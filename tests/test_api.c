@@ -206,6 +206,16 @@ static vkrt_result op_render_albedo(vkrt_context *ctx, long n)
     return render_op(ctx, n, VKRT_MODE_ALBEDO, NULL);
 }
 
+static vkrt_result op_render_path(vkrt_context *ctx, long n)
+{
+    return render_op(ctx, n, VKRT_MODE_PATH, NULL);
+}
+
+static vkrt_result op_render_shaded(vkrt_context *ctx, long n)
+{
+    return render_op(ctx, n, VKRT_MODE_SHADED, NULL);
+}
+
 static char save_dir[] = "/tmp/vkrt_test_api_XXXXXX";
 
 /* Saves a render as `name`; a failed save leaves no file. */
@@ -246,6 +256,8 @@ static void out_of_memory_at_every_cpu_allocation(void)
     oom_every_allocation("scene_create (OBJ with .mtl and a PNG texture)", VKRT_BACKEND_CPU, op_scene_obj_materials);
     oom_every_allocation("render (CPU)", VKRT_BACKEND_CPU, op_render);
     oom_every_allocation("render albedo (CPU)", VKRT_BACKEND_CPU, op_render_albedo);
+    oom_every_allocation("render path (CPU)", VKRT_BACKEND_CPU, op_render_path);
+    oom_every_allocation("render shaded (CPU)", VKRT_BACKEND_CPU, op_render_shaded);
     oom_every_allocation("image_save (.png)", VKRT_BACKEND_CPU, op_save_png);
     oom_every_allocation("image_save (.pfm)", VKRT_BACKEND_CPU, op_save_pfm);
     oom_every_allocation("image_save (.hdr)", VKRT_BACKEND_CPU, op_save_hdr);
@@ -257,6 +269,7 @@ static void out_of_memory_at_every_gpu_allocation(void)
     oom_every_allocation("scene_create (built-in, GPU)", VKRT_BACKEND_GPU, op_scene_builtin);
     oom_every_allocation("render (GPU)", VKRT_BACKEND_GPU, op_render);
     oom_every_allocation("render albedo (GPU, surfaces uploaded)", VKRT_BACKEND_GPU, op_render_albedo);
+    oom_every_allocation("render path (GPU, wavefront)", VKRT_BACKEND_GPU, op_render_path);
 }
 
 /* ---- misuse ---- */
