@@ -133,6 +133,38 @@ vkrt_result mesh_add_material(core *c, mesh *m, const vkrt_material *mat, uint32
     return VKRT_OK;
 }
 
+vkrt_result mesh_add_light(core *c, mesh *m, const vkrt_light *light, vkrt_result invalid, const char *source,
+                           const char *what)
+{
+    if (light->type != VKRT_LIGHT_DIRECTIONAL && light->type != VKRT_LIGHT_POINT)
+        return core_fail(c, invalid, "%s: %s: light type %d is neither directional nor point", source, what,
+                         (int)light->type);
+    for (int i = 0; i < 3; i++) {
+        if (!isfinite(light->vector[i]))
+            return core_fail(c, invalid, "%s: %s: light %s has a non-finite coordinate (%g)", source, what,
+                             light->type == VKRT_LIGHT_POINT ? "position" : "direction", (double)light->vector[i]);
+        if (!(light->color[i] >= 0.0f) || !isfinite(light->color[i]))
+            return core_fail(c, invalid, "%s: %s: light colour[%d] is %g; it must be finite and >= 0", source, what,
+                             i, (double)light->color[i]);
+    }
+    if (light->type == VKRT_LIGHT_DIRECTIONAL && light->vector[0] == 0.0f && light->vector[1] == 0.0f &&
+        light->vector[2] == 0.0f)
+        return core_fail(c, invalid, "%s: %s: directional light without a direction (0, 0, 0)", source, what);
+    if (m->light_count == m->light_capacity) {
+        if (m->light_capacity > UINT32_MAX / 2)
+            return core_fail(c, VKRT_ERROR_LIMIT, "%s: %s: more than %u lights", source, what, m->light_capacity);
+        uint32_t cap = m->light_capacity ? m->light_capacity * 2 : 4;
+        vkrt_light *fresh = core_alloc_array(c, cap, sizeof *fresh);
+        if (!fresh) return core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "%s: out of memory for %u lights", source, cap);
+        if (m->light_count) memcpy(fresh, m->lights, m->light_count * sizeof *fresh);
+        core_free(c, m->lights);
+        m->lights = fresh;
+        m->light_capacity = cap;
+    }
+    m->lights[m->light_count++] = *light;
+    return VKRT_OK;
+}
+
 static bool finite3(const float *v)
 {
     return isfinite(v[0]) && isfinite(v[1]) && isfinite(v[2]);
@@ -396,6 +428,24 @@ vkrt_result mesh_normalize(core *c, mesh *m, const char *source)
                          "%s: coordinates span %.3g, beyond the float range (%.3g): cannot normalise", source,
                          extent, (double)FLT_MAX);
     double scale = extent > 0.0 ? 1.0 / extent : 1.0;
+    /* Point lights move with the geometry. Irradiance from a point light is I / d^2, and every
+     * distance d scales by `scale`: I times scale^2 lights the surfaces as before. The first pass
+     * only checks, so a light that leaves the float range (far from a tiny scene) fails before
+     * anything has moved. */
+    for (int pass = 0; pass < 2; pass++)
+        for (uint32_t i = 0; i < m->light_count; i++) {
+            if (m->lights[i].type != VKRT_LIGHT_POINT) continue; /* a direction is the same at any scale */
+            vkrt_light l = m->lights[i];
+            for (int j = 0; j < 3; j++) {
+                l.vector[j] = (float)(((double)l.vector[j] - centre[j]) * scale);
+                l.color[j] = (float)((double)l.color[j] * scale * scale);
+            }
+            if (pass == 1) m->lights[i] = l;
+            else if (!finite3(l.vector) || !finite3(l.color))
+                return core_fail(c, VKRT_ERROR_INVALID_GEOMETRY,
+                                 "%s: point light %u leaves the float range when the scene is normalised (scale %.3g)",
+                                 source, i, scale);
+        }
     size_t corners = (size_t)m->tri_count * 3;
     for (size_t i = 0; i < corners; i++) {
         float *v = m->positions + 3 * i;

@@ -85,6 +85,12 @@ vkrt_result mesh_add_texture_image(core *c, mesh *m, const void *bytes, size_t s
 vkrt_result mesh_add_texture_file(core *c, mesh *m, const char *path, vkrt_wrap wrap_u, vkrt_wrap wrap_v,
                                   const char *source, const char *what, uint32_t *out_index);
 
+/* Appends a light to m->lights. A type other than directional or point, a non-finite vector or
+ * colour, a negative colour or a directional light of zero direction fails with `invalid` and a
+ * message naming `source` and `what`. */
+vkrt_result mesh_add_light(core *c, mesh *m, const vkrt_light *light, vkrt_result invalid, const char *source,
+                           const char *what);
+
 /* Appends a primitive's triangles. Checks every coordinate (and texture coordinate) is
  * finite, the material exists, and every index is below vertex_count; `source` (the file name) and `what` (e.g. "mesh 2 primitive 0") name the
  * culprit in the failure message: VKRT_ERROR_INVALID_GEOMETRY or VKRT_ERROR_OUT_OF_MEMORY. */
@@ -109,9 +115,12 @@ vkrt_result mesh_finish(core *c, mesh *m, vkrt_result r);
 /* Recomputes bounds_min/max from the corners. */
 void mesh_update_bounds(mesh *m);
 /* Moves the bounding-box centre to the origin and scales the largest extent to 1, so the
- * scene fits [-0.5, 0.5]^3. A scene of zero extent is only centred. An extent beyond the
- * float range (coordinates of 3e38 and -3e38) is VKRT_ERROR_INVALID_GEOMETRY with a message
- * naming `source` (the file), and the mesh is left as it was. */
+ * scene fits [-0.5, 0.5]^3. A scene of zero extent is only centred. Point lights move with the
+ * geometry and their intensities scale by the square of the scale, so the irradiance they give
+ * the surfaces stays the same; directional lights stay as they are. An extent beyond the float
+ * range (coordinates of 3e38 and -3e38), or a light that would leave the float range, is
+ * VKRT_ERROR_INVALID_GEOMETRY with a message naming `source` (the file), and the mesh is left
+ * as it was. */
 vkrt_result mesh_normalize(core *c, mesh *m, const char *source);
 
 void mesh_destroy(core *c, mesh *m);

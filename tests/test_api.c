@@ -143,6 +143,12 @@ static vkrt_result op_scene_obj_materials(vkrt_context *ctx, long n)
     return scene_op(ctx, n, &(vkrt_scene_desc){ .path = VKRT_TEST_DATA_DIR "/materials.obj" });
 }
 
+/* KHR_lights_punctual lights on transformed nodes, normalised with the scene. */
+static vkrt_result op_scene_lights_gltf(vkrt_context *ctx, long n)
+{
+    return scene_op(ctx, n, &(vkrt_scene_desc){ .path = VKRT_TEST_DATA_DIR "/lights.gltf" });
+}
+
 /* Two PNG base colour textures, decoded by stb_image through the context's allocator. */
 static vkrt_result op_scene_textured_gltf(vkrt_context *ctx, long n)
 {
@@ -244,6 +250,7 @@ static void out_of_memory_at_every_cpu_allocation(void)
     oom_every_allocation("scene_create (in-memory meshes)", VKRT_BACKEND_CPU, op_scene_memory);
     oom_every_allocation("scene_create (glTF with PNG textures)", VKRT_BACKEND_CPU, op_scene_textured_gltf);
     oom_every_allocation("scene_create (OBJ with .mtl and a PNG texture)", VKRT_BACKEND_CPU, op_scene_obj_materials);
+    oom_every_allocation("scene_create (glTF with punctual lights)", VKRT_BACKEND_CPU, op_scene_lights_gltf);
     oom_every_allocation("render (CPU)", VKRT_BACKEND_CPU, op_render);
     oom_every_allocation("render albedo (CPU)", VKRT_BACKEND_CPU, op_render_albedo);
     oom_every_allocation("image_save (.png)", VKRT_BACKEND_CPU, op_save_png);
