@@ -228,8 +228,9 @@ typedef struct gltf_walk {
     size_t triangle_primitives;
     uint32_t *materials;       /* per glTF material: MESH_MATERIAL(its index in m), 0 until a
                                   primitive uses it */
-    uint32_t *textures;        /* per glTF texture: 1 + its index in m, 0 until used,
-                                  UINT32_MAX when it could not be read */
+    uint32_t *textures;        /* per glTF texture and encoding (entry 2 * texture + encoding): 1 +
+                                  its index in m, 0 until used, UINT32_MAX when it could not be
+                                  read; a texture used as colour and as data is decoded twice */
     bool *spot_warned;         /* per glTF light: its cone has been reported ignored */
     const cgltf_options *options;
 } gltf_walk;
@@ -284,12 +285,13 @@ static vkrt_wrap gltf_wrap(cgltf_int mode)
     return mode == 33071 ? VKRT_WRAP_CLAMP : mode == 33648 ? VKRT_WRAP_MIRROR : VKRT_WRAP_REPEAT;
 }
 
-/* The mesh texture of a glTF texture, decoded on first use. A texture that cannot be read
- * (missing file, undecodable image) is a warning and no texture: VKRT_NO_TEXTURE. */
-static vkrt_result texture_of(gltf_walk *w, const cgltf_texture *t, const char *what, uint32_t *out)
+/* The mesh texture of a glTF texture, decoded on first use with that encoding. A texture that
+ * cannot be read (missing file, undecodable image) is a warning and no texture: VKRT_NO_TEXTURE. */
+static vkrt_result texture_of(gltf_walk *w, const cgltf_texture *t, texture_encoding encoding, const char *what,
+                              uint32_t *out)
 {
     *out = VKRT_NO_TEXTURE;
-    size_t k = (size_t)(t - w->data->textures);
+    size_t k = 2 * (size_t)(t - w->data->textures) + (encoding == TEXTURE_LINEAR);
     if (w->textures[k]) {
         *out = w->textures[k] == UINT32_MAX ? VKRT_NO_TEXTURE : w->textures[k] - 1;
         return VKRT_OK;
@@ -309,7 +311,7 @@ static vkrt_result texture_of(gltf_walk *w, const cgltf_texture *t, const char *
         memcpy(file, w->path, dir);
         strcpy(file + dir, image->uri);
         cgltf_decode_uri(file + dir);
-        r = mesh_add_texture_file(w->c, w->m, file, wrap_u, wrap_v, w->path, what, &index);
+        r = mesh_add_texture_file(w->c, w->m, file, wrap_u, wrap_v, encoding, w->path, what, &index);
         core_free(w->c, file);
     } else {
         const char *reason = "it has no image";
@@ -324,7 +326,8 @@ static vkrt_result texture_of(gltf_walk *w, const cgltf_texture *t, const char *
                      w->path, what, reason);
             return VKRT_OK;
         }
-        r = mesh_add_texture_image(w->c, w->m, bytes, size, wrap_u, wrap_v, "(embedded)", w->path, what, &index);
+        r = mesh_add_texture_image(w->c, w->m, bytes, size, wrap_u, wrap_v, encoding, "(embedded)", w->path, what,
+                                   &index);
         if (owned) core_free(w->c, (void *)bytes);
     }
     if (r != VKRT_OK || index == VKRT_NO_TEXTURE) return r;
@@ -333,9 +336,24 @@ static vkrt_result texture_of(gltf_walk *w, const cgltf_texture *t, const char *
     return VKRT_OK;
 }
 
+/* The mesh texture a material's texture view names (kind names it in messages), or
+ * VKRT_NO_TEXTURE where the view names none. */
+static vkrt_result view_texture(gltf_walk *w, const cgltf_texture_view *view, const char *kind,
+                                texture_encoding encoding, const char *what, uint32_t *out)
+{
+    *out = VKRT_NO_TEXTURE;
+    if (!view->texture) return VKRT_OK;
+    if (view->texcoord != 0)
+        core_log(w->c, VKRT_LOG_WARN, "%s: %s: %s texture reads TEXCOORD_%d; TEXCOORD_0 used", w->path, what, kind,
+                 (int)view->texcoord);
+    return texture_of(w, view->texture, encoding, what, out);
+}
+
 /* The mesh material of a primitive's glTF material, added on first use; 0 (the default) for a
  * primitive without one. Factors follow the glTF 2.0 defaults where absent; the emissive
- * strength of KHR_materials_emissive_strength scales the emissive factor. */
+ * strength of KHR_materials_emissive_strength scales the emissive factor. The base colour and
+ * emissive textures are sRGB colour; the metallic-roughness texture is linear data (roughness
+ * in G, metallic in B), as the specification stores them. */
 static vkrt_result primitive_material(gltf_walk *w, const cgltf_primitive *prim, uint32_t *out)
 {
     *out = 0;
@@ -358,16 +376,19 @@ static vkrt_result primitive_material(gltf_walk *w, const cgltf_primitive *prim,
     for (int i = 0; i < 3; i++) mat.emissive[i] = g->emissive_factor[i] * strength;
     char what[64];
     snprintf(what, sizeof what, "material %zu", k);
-    uint32_t texture = VKRT_NO_TEXTURE, index;
-    const cgltf_texture_view *view = &g->pbr_metallic_roughness.base_color_texture;
-    if (g->has_pbr_metallic_roughness && view->texture) {
-        if (view->texcoord != 0)
-            core_log(w->c, VKRT_LOG_WARN, "%s: %s: base colour texture reads TEXCOORD_%d; TEXCOORD_0 used", w->path,
-                     what, (int)view->texcoord);
-        vkrt_result r = texture_of(w, view->texture, what, &texture);
-        if (r != VKRT_OK) return r;
+    mesh_material_textures textures = MESH_NO_TEXTURES;
+    vkrt_result r = VKRT_OK;
+    if (g->has_pbr_metallic_roughness) {
+        const cgltf_pbr_metallic_roughness *pbr = &g->pbr_metallic_roughness;
+        r = view_texture(w, &pbr->base_color_texture, "base colour", TEXTURE_SRGB, what, &textures.base_color);
+        if (r == VKRT_OK)
+            r = view_texture(w, &pbr->metallic_roughness_texture, "metallic-roughness", TEXTURE_LINEAR, what,
+                             &textures.metallic_roughness);
     }
-    vkrt_result r = mesh_add_material(w->c, w->m, &mat, texture, VKRT_ERROR_PARSE, w->path, what, &index);
+    if (r == VKRT_OK) r = view_texture(w, &g->emissive_texture, "emissive", TEXTURE_SRGB, what, &textures.emissive);
+    if (r != VKRT_OK) return r;
+    uint32_t index;
+    r = mesh_add_material(w->c, w->m, &mat, &textures, VKRT_ERROR_PARSE, w->path, what, &index);
     if (r != VKRT_OK) return r;
     *out = w->materials[k] = MESH_MATERIAL(index);
     return VKRT_OK;
@@ -937,7 +958,7 @@ vkrt_result mesh_load_gltf(core *c, const char *path, mesh *m)
     }
     gltf_walk w = { .c = c, .path = path, .data = data, .m = m, .options = &options };
     w.materials = core_calloc_array(c, data->materials_count ? data->materials_count : 1, sizeof *w.materials);
-    w.textures = core_calloc_array(c, data->textures_count ? data->textures_count : 1, sizeof *w.textures);
+    w.textures = core_calloc_array(c, data->textures_count ? data->textures_count : 1, 2 * sizeof *w.textures);
     w.spot_warned = core_calloc_array(c, data->lights_count ? data->lights_count : 1, sizeof *w.spot_warned);
     if (!w.materials || !w.textures || !w.spot_warned) {
         core_free(c, w.materials);

@@ -212,6 +212,22 @@ static float clamp01(float v)
     return v > 0.0f ? (v < 1.0f ? v : 1.0f) : 0.0f; /* NaN: 0 */
 }
 
+/* The texture file an .mtl names (relative to the .obj), or VKRT_NO_TEXTURE without one. */
+static vkrt_result mtl_texture(obj_state *s, const char *name, texture_encoding encoding, const char *what,
+                               uint32_t *out)
+{
+    *out = VKRT_NO_TEXTURE;
+    if (!name[0]) return VKRT_OK;
+    size_t n = strlen(s->directory) + strlen(name) + 1;
+    char *file = core_alloc(s->c, n);
+    if (!file) return core_fail(s->c, VKRT_ERROR_OUT_OF_MEMORY, "%s: out of memory reading materials", s->path);
+    snprintf(file, n, "%s%s", s->directory, name);
+    vkrt_result r = mesh_add_texture_file(s->c, s->m, file, VKRT_WRAP_REPEAT, VKRT_WRAP_REPEAT, encoding, s->path,
+                                          what, out);
+    core_free(s->c, file);
+    return r;
+}
+
 /* An .mtl material as a vkrt_material: Kd the base colour, d its alpha, Ns (a Phong exponent)
  * the roughness whose GGX lobe has the same width, sqrt(sqrt(2 / (Ns + 2))) (Walter et al.
  * 2007), Ke the emission; OBJ has no metals. map_Kd is read relative to the .obj. */
@@ -224,19 +240,10 @@ static void add_material(obj_state *s, const tinyobj_shim_material *src, size_t 
     for (int k = 0; k < 3; k++) mat.emissive[k] = src->emission[k] > 0.0f && isfinite(src->emission[k]) ? src->emission[k] : 0.0f;
     char what[96];
     snprintf(what, sizeof what, "material %zu (%.40s)", index, src->name);
-    uint32_t texture = VKRT_NO_TEXTURE, mesh_index = 0;
-    vkrt_result r = VKRT_OK;
-    if (src->diffuse_texture[0]) {
-        size_t n = strlen(s->directory) + strlen(src->diffuse_texture) + 1;
-        char *file = core_alloc(s->c, n);
-        if (!file) r = core_fail(s->c, VKRT_ERROR_OUT_OF_MEMORY, "%s: out of memory reading materials", s->path);
-        if (file) {
-            snprintf(file, n, "%s%s", s->directory, src->diffuse_texture);
-            r = mesh_add_texture_file(s->c, s->m, file, VKRT_WRAP_REPEAT, VKRT_WRAP_REPEAT, s->path, what, &texture);
-            core_free(s->c, file);
-        }
-    }
-    if (r == VKRT_OK) r = mesh_add_material(s->c, s->m, &mat, texture, VKRT_ERROR_PARSE, s->path, what, &mesh_index);
+    mesh_material_textures textures = MESH_NO_TEXTURES;
+    uint32_t mesh_index = 0;
+    vkrt_result r = mtl_texture(s, src->diffuse_texture, TEXTURE_SRGB, what, &textures.base_color);
+    if (r == VKRT_OK) r = mesh_add_material(s->c, s->m, &mat, &textures, VKRT_ERROR_PARSE, s->path, what, &mesh_index);
     if (r != VKRT_OK) {
         fail_in_callback(s, r);
         return;

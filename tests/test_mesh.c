@@ -9,6 +9,7 @@
 
 #include "check.h"
 #include "mesh.h"
+#include "scene_pack.h"
 #include "texture.h"
 
 #define MODEL(rel) VKRT_MODELS_DIR "/" rel
@@ -949,7 +950,7 @@ static void gltf_base_colour_textures_load_and_a_missing_one_is_a_warning(void)
     mesh_destroy(&g_core, &m);
 }
 
-/* ---- lights ----------------------------------------------------------------------------- */
+/* ---- lights ---------------------------------------------------------------------------- */
 
 /* text with its first `from` replaced by `to` (malloc'd); the test fails if from is missing. */
 static char *replaced(const char *text, const char *from, const char *to)
@@ -1129,6 +1130,54 @@ static void normalize_refuses_a_point_light_pushed_beyond_float(void)
     mesh_destroy(&g_core, &m);
 }
 
+/* ---- metallic-roughness and emissive textures ------------------------------------------ */
+
+/* pbr_textures.gltf: one 1x1 image of (255, 128, 64) used as the metallic-roughness texture
+ * (linear data: G 128 is 0.502, not sRGB's 0.216) and as the emissive one (sRGB colour), so it is
+ * decoded once each way; the factors stay factors, and the packed GPU material names both
+ * textures and no base colour one. */
+static void gltf_metallic_roughness_texture_is_linear_and_emissive_srgb(void)
+{
+    mesh m;
+    CHECK_MSG(load(DATA("pbr_textures.gltf"), &m) == VKRT_OK, "%s", g_core.last_error);
+    CHECK_EQ_U64(m.material_count, 1);
+    CHECK_EQ_U64(m.texture_count, 2);
+    if (m.material_count != 1 || m.texture_count != 2) {
+        mesh_destroy(&g_core, &m);
+        return;
+    }
+    const vkrt_material *mat = &m.materials[0];
+    CHECK(mat->metallic == 0.5f && mat->roughness == 0.75f && mat->emissive[0] == 1.0f && mat->emissive[1] == 0.5f &&
+          mat->emissive[2] == 0.25f);
+    CHECK(mat->metallic_roughness_texture == NULL && mat->emissive_texture == NULL);
+    uint32_t mr = m.material_metallic_roughness_textures[0], em = m.material_emissive_textures[0];
+    CHECK(m.material_textures[0] == VKRT_NO_TEXTURE && mr < 2 && em < 2 && mr != em);
+    if (mr >= 2 || em >= 2) {
+        mesh_destroy(&g_core, &m);
+        return;
+    }
+    float linear[4], srgb[4];
+    vkrt_gpu_texture t = { 0, 1, 1, 0 };
+    texture_sample(&t, m.textures[mr].texels, 0.5f, 0.5f, linear);
+    texture_sample(&t, m.textures[em].texels, 0.5f, 0.5f, srgb);
+    CHECK_NEAR(linear[0], 1.0, 0);
+    CHECK_NEAR(linear[1], 128.0 / 255.0, 1e-3); /* roughness */
+    CHECK_NEAR(linear[2], 64.0 / 255.0, 1e-3);  /* metallic */
+    CHECK_NEAR(srgb[1], pow((128.0 / 255.0 + 0.055) / 1.055, 2.4), 1e-3);
+    CHECK_NEAR(srgb[2], pow((64.0 / 255.0 + 0.055) / 1.055, 2.4), 1e-3);
+
+    vkrt_gpu_surface surfaces[1];
+    vkrt_gpu_material gpu[1];
+    vkrt_gpu_texture textures[2];
+    uint32_t texels[2 * 2];
+    CHECK_EQ_U64(scene_texel_count(&m), 2);
+    scene_pack_surfaces(&m, surfaces, gpu, textures, texels);
+    CHECK(gpu[0].base_color_texture == VKRT_NO_TEXTURE);
+    CHECK(gpu[0].metallic_roughness_texture == mr && gpu[0].emissive_texture == em);
+    CHECK(gpu[0].metallic == 0.5f && gpu[0].roughness == 0.75f && gpu[0].emissive.y == 0.5f);
+    mesh_destroy(&g_core, &m);
+}
+
 int main(void)
 {
     core_init(&g_core, NULL, on_log, NULL);
@@ -1171,6 +1220,7 @@ int main(void)
     RUN(gltf_lights_with_non_finite_or_negative_values_are_parse_errors);
     RUN(add_light_validates_type_values_and_direction);
     RUN(normalize_refuses_a_point_light_pushed_beyond_float);
+    RUN(gltf_metallic_roughness_texture_is_linear_and_emissive_srgb);
     RUN(every_allocation_failure_is_out_of_memory_and_leaks_nothing);
     remove_temp_dir();
     return check_exit();
