@@ -230,19 +230,28 @@ static vkrt_result mtl_texture(obj_state *s, const char *name, texture_encoding 
 
 /* An .mtl material as a vkrt_material: Kd the base colour, d its alpha, Ns (a Phong exponent)
  * the roughness whose GGX lobe has the same width, sqrt(sqrt(2 / (Ns + 2))) (Walter et al.
- * 2007), Ke the emission; OBJ has no metals. map_Kd is read relative to the .obj. */
+ * 2007), Ke the emission. The PBR extension's Pr, where given, is the roughness instead, and its
+ * Pm the metallic (0 without). map_Kd and map_Ke (sRGB) are read relative to the .obj; map_Pr
+ * and map_Pm are not read (vkrt's metallic-roughness texture packs both in one image). */
 static void add_material(obj_state *s, const tinyobj_shim_material *src, size_t index)
 {
     vkrt_material mat = { .base_color = { clamp01(src->diffuse[0]), clamp01(src->diffuse[1]),
                                           clamp01(src->diffuse[2]), clamp01(src->dissolve) } };
     double ns = src->shininess > 0.0f ? (double)src->shininess : 0.0;
-    mat.roughness = clamp01((float)sqrt(sqrt(2.0 / (ns + 2.0))));
+    mat.roughness = src->has_roughness ? clamp01(src->roughness) : clamp01((float)sqrt(sqrt(2.0 / (ns + 2.0))));
+    mat.metallic = clamp01(src->metallic);
     for (int k = 0; k < 3; k++) mat.emissive[k] = src->emission[k] > 0.0f && isfinite(src->emission[k]) ? src->emission[k] : 0.0f;
     char what[96];
     snprintf(what, sizeof what, "material %zu (%.40s)", index, src->name);
     mesh_material_textures textures = MESH_NO_TEXTURES;
     uint32_t mesh_index = 0;
     vkrt_result r = mtl_texture(s, src->diffuse_texture, TEXTURE_SRGB, what, &textures.base_color);
+    if (r == VKRT_OK) r = mtl_texture(s, src->emissive_texture, TEXTURE_SRGB, what, &textures.emissive);
+    /* map_Ke without Ke (tinyobjloader's 0 0 0): the texture alone is the emission, since a map
+     * scaled by nothing would be the same as none. */
+    if (textures.emissive != VKRT_NO_TEXTURE && mat.emissive[0] == 0.0f && mat.emissive[1] == 0.0f &&
+        mat.emissive[2] == 0.0f)
+        mat.emissive[0] = mat.emissive[1] = mat.emissive[2] = 1.0f;
     if (r == VKRT_OK) r = mesh_add_material(s->c, s->m, &mat, &textures, VKRT_ERROR_PARSE, s->path, what, &mesh_index);
     if (r != VKRT_OK) {
         fail_in_callback(s, r);

@@ -851,7 +851,7 @@ static void every_allocation_failure_is_out_of_memory_and_leaks_nothing(void)
     static const struct {
         const char *path; /* NULL: the built-in scene */
         size_t min_size;
-    } cases[] = { { DATA("groups.obj"), 0 }, { MODEL("obj/draco/octagon.obj"), 0 },
+    } cases[] = { { DATA("groups.obj"), 0 }, { MODEL("obj/draco/octagon.obj"), 0 }, { DATA("pbr.obj"), 0 },
                   { MODEL("gltf/draco/Duck/Duck.glb"), GLTF_FAILABLE_SIZE },
                   { MODEL("gltf/draco/CesiumMilkTruck/CesiumMilkTruck.gltf"), GLTF_FAILABLE_SIZE },
                   { MODEL("gltf/draco/CubeScaledInstances/cube_att.gltf"), 256 },
@@ -1178,6 +1178,44 @@ static void gltf_metallic_roughness_texture_is_linear_and_emissive_srgb(void)
     mesh_destroy(&g_core, &m);
 }
 
+/* pbr.obj: Pr replaces the Ns roughness where given (Pr 0 included, though Ns says otherwise),
+ * Pm is the metallic, map_Ke is an emissive texture (emission 1 where no Ke scales it, Ke where
+ * one does), and map_Pr and map_Pm are not read (no warning for their missing files). */
+static void obj_pbr_extension_and_emissive_maps_load(void)
+{
+    mesh m;
+    last_warning[0] = '\0';
+    CHECK_MSG(load(DATA("pbr.obj"), &m) == VKRT_OK, "%s", g_core.last_error);
+    CHECK_EQ_U64(m.tri_count, 4);
+    CHECK_EQ_U64(m.material_count, 4);
+    CHECK_EQ_U64(m.texture_count, 2);
+    CHECK_MSG(last_warning[0] == '\0', "warning: '%s'", last_warning);
+    if (m.tri_count != 4 || m.material_count != 4) {
+        mesh_destroy(&g_core, &m);
+        return;
+    }
+    const uint32_t *id = m.material_ids;
+    const vkrt_material *mirror = &m.materials[id[0]], *rough = &m.materials[id[1]], *glow = &m.materials[id[2]],
+                        *tinted = &m.materials[id[3]];
+    CHECK_MSG(mirror->roughness == 0.0f && mirror->metallic == 0.75f, "mirror_metal: roughness %g metallic %g",
+              (double)mirror->roughness, (double)mirror->metallic);
+    CHECK_MSG(fabs(rough->roughness - 0.4) < 1e-6 && rough->metallic == 0.0f, "rough: roughness %g",
+              (double)rough->roughness);
+    CHECK_MSG(fabs(glow->roughness - pow(2.0 / 16.0, 0.25)) < 1e-6, "glowing (Ns 14): roughness %g",
+              (double)glow->roughness);
+    for (int i = 0; i < 2; i++)
+        CHECK(m.material_emissive_textures[id[i]] == VKRT_NO_TEXTURE && m.materials[id[i]].emissive[0] == 0.0f);
+    for (int i = 0; i < 4; i++) {
+        CHECK(m.material_metallic_roughness_textures[id[i]] == VKRT_NO_TEXTURE);
+        CHECK(m.material_textures[id[i]] == VKRT_NO_TEXTURE);
+    }
+    CHECK(m.material_emissive_textures[id[2]] != VKRT_NO_TEXTURE &&
+          m.material_emissive_textures[id[3]] != VKRT_NO_TEXTURE);
+    CHECK(glow->emissive[0] == 1.0f && glow->emissive[1] == 1.0f && glow->emissive[2] == 1.0f);
+    CHECK(tinted->emissive[0] == 2.0f && tinted->emissive[1] == 1.0f && tinted->emissive[2] == 0.5f);
+    mesh_destroy(&g_core, &m);
+}
+
 int main(void)
 {
     core_init(&g_core, NULL, on_log, NULL);
@@ -1221,6 +1259,7 @@ int main(void)
     RUN(add_light_validates_type_values_and_direction);
     RUN(normalize_refuses_a_point_light_pushed_beyond_float);
     RUN(gltf_metallic_roughness_texture_is_linear_and_emissive_srgb);
+    RUN(obj_pbr_extension_and_emissive_maps_load);
     RUN(every_allocation_failure_is_out_of_memory_and_leaks_nothing);
     remove_temp_dir();
     return check_exit();
