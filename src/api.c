@@ -184,13 +184,30 @@ static vkrt_result meshes_from_memory(core *c, const vkrt_scene_desc *d, mesh *m
         };
         vkrt_result r = VKRT_OK;
         if (md->material) {
-            uint32_t texture = VKRT_NO_TEXTURE, index = 0;
-            if (md->material->base_color_texture)
-                r = mesh_add_texture(c, m, md->material->base_color_texture, VKRT_ERROR_INVALID_ARGUMENT,
-                                     "in-memory scene", what, &texture);
+            const vkrt_material *mat = md->material;
+            mesh_material_textures textures = MESH_NO_TEXTURES;
+            const struct {
+                const vkrt_texture_desc *desc;
+                texture_encoding encoding;
+                uint32_t *index;
+                const char *field;
+            } maps[] = {
+                { mat->base_color_texture, TEXTURE_SRGB, &textures.base_color, "base_color_texture" },
+                { mat->metallic_roughness_texture, TEXTURE_LINEAR, &textures.metallic_roughness,
+                  "metallic_roughness_texture" },
+                { mat->emissive_texture, TEXTURE_SRGB, &textures.emissive, "emissive_texture" },
+            };
+            for (size_t k = 0; k < sizeof maps / sizeof maps[0] && r == VKRT_OK; k++) {
+                if (!maps[k].desc) continue;
+                char field[96];
+                snprintf(field, sizeof field, "%s.material->%s", what, maps[k].field);
+                r = mesh_add_texture(c, m, maps[k].desc, maps[k].encoding, VKRT_ERROR_INVALID_ARGUMENT,
+                                     "in-memory scene", field, maps[k].index);
+            }
+            uint32_t index = 0;
             if (r == VKRT_OK)
-                r = mesh_add_material(c, m, md->material, texture, VKRT_ERROR_INVALID_ARGUMENT, "in-memory scene",
-                                      what, &index);
+                r = mesh_add_material(c, m, mat, &textures, VKRT_ERROR_INVALID_ARGUMENT, "in-memory scene", what,
+                                      &index);
             p.material = MESH_MATERIAL(index);
         }
         if (r == VKRT_OK) r = mesh_append_indexed(c, m, &p, "in-memory scene", what);

@@ -54,8 +54,8 @@ static int reserve(core *c, mesh *m, size_t needed)
     return 0;
 }
 
-vkrt_result mesh_add_texture(core *c, mesh *m, const vkrt_texture_desc *desc, vkrt_result invalid, const char *source,
-                             const char *what, uint32_t *out_index)
+vkrt_result mesh_add_texture(core *c, mesh *m, const vkrt_texture_desc *desc, texture_encoding encoding,
+                             vkrt_result invalid, const char *source, const char *what, uint32_t *out_index)
 {
     if (!desc->rgba8) return core_fail(c, invalid, "%s: %s: texture without pixels", source, what);
     if (desc->width == 0 || desc->height == 0 || desc->width > TEXTURE_MAX_SIDE || desc->height > TEXTURE_MAX_SIDE ||
@@ -77,15 +77,16 @@ vkrt_result mesh_add_texture(core *c, mesh *m, const vkrt_texture_desc *desc, vk
     if (!texels)
         return core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "%s: %s: out of memory for a %ux%u texture", source, what,
                          desc->width, desc->height);
-    texture_encode_rgba8(desc->rgba8, desc->width, desc->height, texels);
+    if (encoding == TEXTURE_LINEAR) texture_encode_rgba8_linear(desc->rgba8, desc->width, desc->height, texels);
+    else texture_encode_rgba8(desc->rgba8, desc->width, desc->height, texels);
     m->textures[m->texture_count] = (mesh_texture){ desc->width, desc->height,
                                                     (uint32_t)desc->wrap_u | (uint32_t)desc->wrap_v << 8, texels };
     *out_index = m->texture_count++;
     return VKRT_OK;
 }
 
-vkrt_result mesh_add_material(core *c, mesh *m, const vkrt_material *mat, uint32_t texture, vkrt_result invalid,
-                              const char *source, const char *what, uint32_t *out_index)
+vkrt_result mesh_add_material(core *c, mesh *m, const vkrt_material *mat, const mesh_material_textures *textures,
+                              vkrt_result invalid, const char *source, const char *what, uint32_t *out_index)
 {
     const struct {
         const char *name;
@@ -106,30 +107,83 @@ vkrt_result mesh_add_material(core *c, mesh *m, const vkrt_material *mat, uint32
                 return core_fail(c, invalid, "%s: %s: material %s[%d] is %g, outside [0, %g]", source, what,
                                  fields[f].name, i, (double)v, (double)fields[f].max);
         }
-    if (texture != VKRT_NO_TEXTURE && texture >= m->texture_count)
-        return core_fail(c, invalid, "%s: %s: texture %u of %u does not exist", source, what, texture, m->texture_count);
+    const mesh_material_textures t = textures ? *textures : MESH_NO_TEXTURES;
+    const struct {
+        const char *name;
+        uint32_t index;
+        uint32_t **table; /* the mesh's per-material array for this kind */
+    } kinds[] = {
+        { "base colour", t.base_color, &m->material_textures },
+        { "metallic-roughness", t.metallic_roughness, &m->material_metallic_roughness_textures },
+        { "emissive", t.emissive, &m->material_emissive_textures },
+    };
+    enum { KINDS = sizeof kinds / sizeof kinds[0] };
+    for (int k = 0; k < KINDS; k++)
+        if (kinds[k].index != VKRT_NO_TEXTURE && kinds[k].index >= m->texture_count)
+            return core_fail(c, invalid, "%s: %s: %s texture %u of %u does not exist", source, what, kinds[k].name,
+                             kinds[k].index, m->texture_count);
     if (m->material_count == m->material_capacity) {
         uint32_t cap = m->material_capacity ? m->material_capacity * 2 : 8;
         vkrt_material *fresh = cap > m->material_capacity ? core_alloc_array(c, cap, sizeof *fresh) : NULL;
-        uint32_t *fresh_textures = fresh ? core_alloc_array(c, cap, sizeof *fresh_textures) : NULL;
-        if (!fresh_textures) {
+        uint32_t *fresh_textures[KINDS];
+        bool ok = fresh != NULL;
+        for (int k = 0; k < KINDS; k++)
+            ok = (fresh_textures[k] = ok ? core_alloc_array(c, cap, sizeof(uint32_t)) : NULL) != NULL;
+        if (!ok) {
             core_free(c, fresh);
+            for (int k = 0; k < KINDS; k++) core_free(c, fresh_textures[k]);
             return core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "%s: out of memory for %u materials", source, cap);
         }
-        if (m->material_count) {
-            memcpy(fresh, m->materials, m->material_count * sizeof *fresh);
-            memcpy(fresh_textures, m->material_textures, m->material_count * sizeof *fresh_textures);
-        }
+        if (m->material_count) memcpy(fresh, m->materials, m->material_count * sizeof *fresh);
         core_free(c, m->materials);
-        core_free(c, m->material_textures);
         m->materials = fresh;
-        m->material_textures = fresh_textures;
+        for (int k = 0; k < KINDS; k++) {
+            if (m->material_count) memcpy(fresh_textures[k], *kinds[k].table, m->material_count * sizeof(uint32_t));
+            core_free(c, *kinds[k].table);
+            *kinds[k].table = fresh_textures[k];
+        }
         m->material_capacity = cap;
     }
-    m->materials[m->material_count] = *mat;
-    m->materials[m->material_count].base_color_texture = NULL; /* the caller's, gone after the call */
-    m->material_textures[m->material_count] = texture;
+    vkrt_material *stored = &m->materials[m->material_count];
+    *stored = *mat;
+    /* The caller's, gone after the call; the mesh keeps texture indices instead. */
+    stored->base_color_texture = NULL;
+    stored->metallic_roughness_texture = NULL;
+    stored->emissive_texture = NULL;
+    for (int k = 0; k < KINDS; k++) (*kinds[k].table)[m->material_count] = kinds[k].index;
     *out_index = m->material_count++;
+    return VKRT_OK;
+}
+
+vkrt_result mesh_add_light(core *c, mesh *m, const vkrt_light *light, vkrt_result invalid, const char *source,
+                           const char *what)
+{
+    if (light->type != VKRT_LIGHT_DIRECTIONAL && light->type != VKRT_LIGHT_POINT)
+        return core_fail(c, invalid, "%s: %s: light type %d is neither directional nor point", source, what,
+                         (int)light->type);
+    for (int i = 0; i < 3; i++) {
+        if (!isfinite(light->vector[i]))
+            return core_fail(c, invalid, "%s: %s: light %s has a non-finite coordinate (%g)", source, what,
+                             light->type == VKRT_LIGHT_POINT ? "position" : "direction", (double)light->vector[i]);
+        if (!(light->color[i] >= 0.0f) || !isfinite(light->color[i]))
+            return core_fail(c, invalid, "%s: %s: light colour[%d] is %g; it must be finite and >= 0", source, what,
+                             i, (double)light->color[i]);
+    }
+    if (light->type == VKRT_LIGHT_DIRECTIONAL && light->vector[0] == 0.0f && light->vector[1] == 0.0f &&
+        light->vector[2] == 0.0f)
+        return core_fail(c, invalid, "%s: %s: directional light without a direction (0, 0, 0)", source, what);
+    if (m->light_count == m->light_capacity) {
+        if (m->light_capacity > UINT32_MAX / 2)
+            return core_fail(c, VKRT_ERROR_LIMIT, "%s: %s: more than %u lights", source, what, m->light_capacity);
+        uint32_t cap = m->light_capacity ? m->light_capacity * 2 : 4;
+        vkrt_light *fresh = core_alloc_array(c, cap, sizeof *fresh);
+        if (!fresh) return core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "%s: out of memory for %u lights", source, cap);
+        if (m->light_count) memcpy(fresh, m->lights, m->light_count * sizeof *fresh);
+        core_free(c, m->lights);
+        m->lights = fresh;
+        m->light_capacity = cap;
+    }
+    m->lights[m->light_count++] = *light;
     return VKRT_OK;
 }
 
@@ -314,7 +368,7 @@ vkrt_result mesh_append_indexed(core *c, mesh *m, const mesh_primitive *p, const
     if (p->material == 0) {
         if (!m->has_default_material) {
             const vkrt_material fallback = vkrt_material_default();
-            if ((r = mesh_add_material(c, m, &fallback, VKRT_NO_TEXTURE, VKRT_ERROR_INVALID_ARGUMENT, source, what,
+            if ((r = mesh_add_material(c, m, &fallback, NULL, VKRT_ERROR_INVALID_ARGUMENT, source, what,
                                        &m->default_material)) != VKRT_OK)
                 goto done;
             m->has_default_material = true;
@@ -396,6 +450,24 @@ vkrt_result mesh_normalize(core *c, mesh *m, const char *source)
                          "%s: coordinates span %.3g, beyond the float range (%.3g): cannot normalise", source,
                          extent, (double)FLT_MAX);
     double scale = extent > 0.0 ? 1.0 / extent : 1.0;
+    /* Point lights move with the geometry. Irradiance from a point light is I / d^2, and every
+     * distance d scales by `scale`: I times scale^2 lights the surfaces as before. The first pass
+     * only checks, so a light that leaves the float range (far from a tiny scene) fails before
+     * anything has moved. */
+    for (int pass = 0; pass < 2; pass++)
+        for (uint32_t i = 0; i < m->light_count; i++) {
+            if (m->lights[i].type != VKRT_LIGHT_POINT) continue; /* a direction is the same at any scale */
+            vkrt_light l = m->lights[i];
+            for (int j = 0; j < 3; j++) {
+                l.vector[j] = (float)(((double)l.vector[j] - centre[j]) * scale);
+                l.color[j] = (float)((double)l.color[j] * scale * scale);
+            }
+            if (pass == 1) m->lights[i] = l;
+            else if (!finite3(l.vector) || !finite3(l.color))
+                return core_fail(c, VKRT_ERROR_INVALID_GEOMETRY,
+                                 "%s: point light %u leaves the float range when the scene is normalised (scale %.3g)",
+                                 source, i, scale);
+        }
     size_t corners = (size_t)m->tri_count * 3;
     for (size_t i = 0; i < corners; i++) {
         float *v = m->positions + 3 * i;
@@ -422,6 +494,8 @@ void mesh_destroy(core *c, mesh *m)
     core_free(c, m->material_ids);
     core_free(c, m->materials);
     core_free(c, m->material_textures);
+    core_free(c, m->material_metallic_roughness_textures);
+    core_free(c, m->material_emissive_textures);
     core_free(c, m->lights);
     for (uint32_t i = 0; i < m->texture_count; i++) core_free(c, m->textures[i].texels);
     core_free(c, m->textures);

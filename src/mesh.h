@@ -12,6 +12,7 @@
 
 #include "../shaders/vkrt_shared.h"
 #include "core.h"
+#include "texture.h"
 #include "vkrt.h"
 
 /* mesh_primitive.material for the material mesh_add_material numbered `index`; 0 (a zeroed
@@ -41,6 +42,8 @@ typedef struct mesh {
     bool has_default_material; /* the default material is in the table, at default_material */
     uint32_t default_material;
     uint32_t *material_textures; /* per material: its base colour texture, or VKRT_NO_TEXTURE */
+    uint32_t *material_metallic_roughness_textures; /* per material, likewise (linear data) */
+    uint32_t *material_emissive_textures;           /* per material, likewise */
     mesh_texture *textures;
     uint32_t texture_count;
     uint32_t texture_capacity;
@@ -63,27 +66,44 @@ typedef struct mesh_primitive {
     uint32_t material;       /* MESH_MATERIAL(index from mesh_add_material); 0: the default */
 } mesh_primitive;
 
-/* Adds a material to the table, with its base colour texture (an index from mesh_add_texture,
- * or VKRT_NO_TEXTURE; material->base_color_texture is not read), and returns its index in
- * *out_index. A non-finite factor, or one outside its range (vkrt_material), fails with
- * `invalid` (the caller's code: a file's or an argument's fault) and a message naming `source`
- * and `what`. */
-vkrt_result mesh_add_material(core *c, mesh *m, const vkrt_material *material, uint32_t texture,
+/* The textures of one material: each an index from mesh_add_texture, or VKRT_NO_TEXTURE. Start
+ * from MESH_NO_TEXTURES: a zeroed struct names texture 0 three times. */
+typedef struct mesh_material_textures {
+    uint32_t base_color;         /* sRGB colour, linear alpha (TEXTURE_SRGB) */
+    uint32_t metallic_roughness; /* roughness in G, metallic in B (TEXTURE_LINEAR) */
+    uint32_t emissive;           /* sRGB colour (TEXTURE_SRGB) */
+} mesh_material_textures;
+#define MESH_NO_TEXTURES ((mesh_material_textures){ VKRT_NO_TEXTURE, VKRT_NO_TEXTURE, VKRT_NO_TEXTURE })
+
+/* Adds a material to the table, with its textures (NULL: none; the texture pointers of material
+ * are not read), and returns its index in *out_index. A non-finite factor, or one outside its
+ * range (vkrt_material), or a texture index past the table fails with `invalid` (the caller's
+ * code: a file's or an argument's fault) and a message naming `source` and `what`. */
+vkrt_result mesh_add_material(core *c, mesh *m, const vkrt_material *material, const mesh_material_textures *textures,
                               vkrt_result invalid, const char *source, const char *what, uint32_t *out_index);
 
-/* Adds a texture (its texels encoded from desc->rgba8) and returns its index in *out_index. A
- * side of 0 or over TEXTURE_MAX_SIDE, no pixels or an unknown wrap mode fails with `invalid`. */
-vkrt_result mesh_add_texture(core *c, mesh *m, const vkrt_texture_desc *desc, vkrt_result invalid,
-                             const char *source, const char *what, uint32_t *out_index);
+/* Adds a texture (its texels encoded from desc->rgba8 as `encoding` says) and returns its index
+ * in *out_index. A side of 0 or over TEXTURE_MAX_SIDE, no pixels or an unknown wrap mode fails
+ * with `invalid`. */
+vkrt_result mesh_add_texture(core *c, mesh *m, const vkrt_texture_desc *desc, texture_encoding encoding,
+                             vkrt_result invalid, const char *source, const char *what, uint32_t *out_index);
 
 /* Decodes an image (PNG, JPEG and the other formats stb_image reads) and adds it as a texture.
  * An image that cannot be decoded is a warning naming `name` (with `source` and `what`) and
  * *out_index = VKRT_NO_TEXTURE: only running out of memory fails. */
 vkrt_result mesh_add_texture_image(core *c, mesh *m, const void *bytes, size_t size, vkrt_wrap wrap_u, vkrt_wrap wrap_v,
-                                   const char *name, const char *source, const char *what, uint32_t *out_index);
+                                   texture_encoding encoding, const char *name, const char *source, const char *what,
+                                   uint32_t *out_index);
 /* The same for the image file at path; a missing or unreadable file is a warning too. */
 vkrt_result mesh_add_texture_file(core *c, mesh *m, const char *path, vkrt_wrap wrap_u, vkrt_wrap wrap_v,
-                                  const char *source, const char *what, uint32_t *out_index);
+                                  texture_encoding encoding, const char *source, const char *what,
+                                  uint32_t *out_index);
+
+/* Appends a light to m->lights. A type other than directional or point, a non-finite vector or
+ * colour, a negative colour or a directional light of zero direction fails with `invalid` and a
+ * message naming `source` and `what`. */
+vkrt_result mesh_add_light(core *c, mesh *m, const vkrt_light *light, vkrt_result invalid, const char *source,
+                           const char *what);
 
 /* Appends a primitive's triangles. Checks every coordinate (and texture coordinate) is
  * finite, the material exists, and every index is below vertex_count; `source` (the file name) and `what` (e.g. "mesh 2 primitive 0") name the
@@ -109,9 +129,12 @@ vkrt_result mesh_finish(core *c, mesh *m, vkrt_result r);
 /* Recomputes bounds_min/max from the corners. */
 void mesh_update_bounds(mesh *m);
 /* Moves the bounding-box centre to the origin and scales the largest extent to 1, so the
- * scene fits [-0.5, 0.5]^3. A scene of zero extent is only centred. An extent beyond the
- * float range (coordinates of 3e38 and -3e38) is VKRT_ERROR_INVALID_GEOMETRY with a message
- * naming `source` (the file), and the mesh is left as it was. */
+ * scene fits [-0.5, 0.5]^3. A scene of zero extent is only centred. Point lights move with the
+ * geometry and their intensities scale by the square of the scale, so the irradiance they give
+ * the surfaces stays the same; directional lights stay as they are. An extent beyond the float
+ * range (coordinates of 3e38 and -3e38), or a light that would leave the float range, is
+ * VKRT_ERROR_INVALID_GEOMETRY with a message naming `source` (the file), and the mesh is left
+ * as it was. */
 vkrt_result mesh_normalize(core *c, mesh *m, const char *source);
 
 void mesh_destroy(core *c, mesh *m);

@@ -129,7 +129,7 @@ static vkrt_result append(core *c, mesh *m, const object_desc *o)
 {
     orient(o->positions, o->normals, o->indices, o->tris);
     uint32_t material;
-    vkrt_result r = mesh_add_material(c, m, &o->material, VKRT_NO_TEXTURE, VKRT_ERROR_INVALID_ARGUMENT, "built-in scene", o->what,
+    vkrt_result r = mesh_add_material(c, m, &o->material, NULL, VKRT_ERROR_INVALID_ARGUMENT, "built-in scene", o->what,
                                       &material);
     if (r != VKRT_OK) return r;
     return mesh_append_indexed(c, m,

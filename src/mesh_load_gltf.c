@@ -2,12 +2,14 @@
  *
  * The default scene's nodes are walked depth first, each node's mesh before its children,
  * and every triangle primitive of a node's mesh is appended with the node's world
- * transform. The walk multiplies transforms down the path it took instead of asking cgltf
- * for a node's world matrix, because cgltf keeps one parent per node while files do give a
- * node several parents (an instance under each); a node on the current path is a cycle. */
+ * transform, as is every node's KHR_lights_punctual light. The walk multiplies transforms
+ * down the path it took instead of asking cgltf for a node's world matrix, because cgltf
+ * keeps one parent per node while files do give a node several parents (an instance under
+ * each); a node on the current path is a cycle. */
 #include "mesh.h"
 
 #include <errno.h>
+#include <math.h>
 #include <stdio.h>
 #include <string.h>
 
@@ -53,8 +55,9 @@ static vkrt_result parse_failure(core *c, const char *path, cgltf_result cr, int
     }
 }
 
-/* Extensions a file may require that change nothing vkrt reads: geometry only, no materials
- * or textures. KHR_mesh_quantization is decoded by cgltf_accessor_unpack_floats. */
+/* Extensions a file may require that vkrt reads or can do without: KHR_mesh_quantization is
+ * decoded by cgltf_accessor_unpack_floats and KHR_lights_punctual read by the walk; the others
+ * only refine materials and textures, which then look plainer. */
 static bool extension_supported(const char *name)
 {
     static const char *const exact[] = { "KHR_mesh_quantization", "KHR_texture_transform", "KHR_texture_basisu",
@@ -225,8 +228,10 @@ typedef struct gltf_walk {
     size_t triangle_primitives;
     uint32_t *materials;       /* per glTF material: MESH_MATERIAL(its index in m), 0 until a
                                   primitive uses it */
-    uint32_t *textures;        /* per glTF texture: 1 + its index in m, 0 until used,
-                                  UINT32_MAX when it could not be read */
+    uint32_t *textures;        /* per glTF texture and encoding (entry 2 * texture + encoding): 1 +
+                                  its index in m, 0 until used, UINT32_MAX when it could not be
+                                  read; a texture used as colour and as data is decoded twice */
+    bool *spot_warned;         /* per glTF light: its cone has been reported ignored */
     const cgltf_options *options;
 } gltf_walk;
 
@@ -280,12 +285,13 @@ static vkrt_wrap gltf_wrap(cgltf_int mode)
     return mode == 33071 ? VKRT_WRAP_CLAMP : mode == 33648 ? VKRT_WRAP_MIRROR : VKRT_WRAP_REPEAT;
 }
 
-/* The mesh texture of a glTF texture, decoded on first use. A texture that cannot be read
- * (missing file, undecodable image) is a warning and no texture: VKRT_NO_TEXTURE. */
-static vkrt_result texture_of(gltf_walk *w, const cgltf_texture *t, const char *what, uint32_t *out)
+/* The mesh texture of a glTF texture, decoded on first use with that encoding. A texture that
+ * cannot be read (missing file, undecodable image) is a warning and no texture: VKRT_NO_TEXTURE. */
+static vkrt_result texture_of(gltf_walk *w, const cgltf_texture *t, texture_encoding encoding, const char *what,
+                              uint32_t *out)
 {
     *out = VKRT_NO_TEXTURE;
-    size_t k = (size_t)(t - w->data->textures);
+    size_t k = 2 * (size_t)(t - w->data->textures) + (encoding == TEXTURE_LINEAR);
     if (w->textures[k]) {
         *out = w->textures[k] == UINT32_MAX ? VKRT_NO_TEXTURE : w->textures[k] - 1;
         return VKRT_OK;
@@ -305,7 +311,7 @@ static vkrt_result texture_of(gltf_walk *w, const cgltf_texture *t, const char *
         memcpy(file, w->path, dir);
         strcpy(file + dir, image->uri);
         cgltf_decode_uri(file + dir);
-        r = mesh_add_texture_file(w->c, w->m, file, wrap_u, wrap_v, w->path, what, &index);
+        r = mesh_add_texture_file(w->c, w->m, file, wrap_u, wrap_v, encoding, w->path, what, &index);
         core_free(w->c, file);
     } else {
         const char *reason = "it has no image";
@@ -320,7 +326,8 @@ static vkrt_result texture_of(gltf_walk *w, const cgltf_texture *t, const char *
                      w->path, what, reason);
             return VKRT_OK;
         }
-        r = mesh_add_texture_image(w->c, w->m, bytes, size, wrap_u, wrap_v, "(embedded)", w->path, what, &index);
+        r = mesh_add_texture_image(w->c, w->m, bytes, size, wrap_u, wrap_v, encoding, "(embedded)", w->path, what,
+                                   &index);
         if (owned) core_free(w->c, (void *)bytes);
     }
     if (r != VKRT_OK || index == VKRT_NO_TEXTURE) return r;
@@ -329,9 +336,24 @@ static vkrt_result texture_of(gltf_walk *w, const cgltf_texture *t, const char *
     return VKRT_OK;
 }
 
+/* The mesh texture a material's texture view names (kind names it in messages), or
+ * VKRT_NO_TEXTURE where the view names none. */
+static vkrt_result view_texture(gltf_walk *w, const cgltf_texture_view *view, const char *kind,
+                                texture_encoding encoding, const char *what, uint32_t *out)
+{
+    *out = VKRT_NO_TEXTURE;
+    if (!view->texture) return VKRT_OK;
+    if (view->texcoord != 0)
+        core_log(w->c, VKRT_LOG_WARN, "%s: %s: %s texture reads TEXCOORD_%d; TEXCOORD_0 used", w->path, what, kind,
+                 (int)view->texcoord);
+    return texture_of(w, view->texture, encoding, what, out);
+}
+
 /* The mesh material of a primitive's glTF material, added on first use; 0 (the default) for a
  * primitive without one. Factors follow the glTF 2.0 defaults where absent; the emissive
- * strength of KHR_materials_emissive_strength scales the emissive factor. */
+ * strength of KHR_materials_emissive_strength scales the emissive factor. The base colour and
+ * emissive textures are sRGB colour; the metallic-roughness texture is linear data (roughness
+ * in G, metallic in B), as the specification stores them. */
 static vkrt_result primitive_material(gltf_walk *w, const cgltf_primitive *prim, uint32_t *out)
 {
     *out = 0;
@@ -354,16 +376,19 @@ static vkrt_result primitive_material(gltf_walk *w, const cgltf_primitive *prim,
     for (int i = 0; i < 3; i++) mat.emissive[i] = g->emissive_factor[i] * strength;
     char what[64];
     snprintf(what, sizeof what, "material %zu", k);
-    uint32_t texture = VKRT_NO_TEXTURE, index;
-    const cgltf_texture_view *view = &g->pbr_metallic_roughness.base_color_texture;
-    if (g->has_pbr_metallic_roughness && view->texture) {
-        if (view->texcoord != 0)
-            core_log(w->c, VKRT_LOG_WARN, "%s: %s: base colour texture reads TEXCOORD_%d; TEXCOORD_0 used", w->path,
-                     what, (int)view->texcoord);
-        vkrt_result r = texture_of(w, view->texture, what, &texture);
-        if (r != VKRT_OK) return r;
+    mesh_material_textures textures = MESH_NO_TEXTURES;
+    vkrt_result r = VKRT_OK;
+    if (g->has_pbr_metallic_roughness) {
+        const cgltf_pbr_metallic_roughness *pbr = &g->pbr_metallic_roughness;
+        r = view_texture(w, &pbr->base_color_texture, "base colour", TEXTURE_SRGB, what, &textures.base_color);
+        if (r == VKRT_OK)
+            r = view_texture(w, &pbr->metallic_roughness_texture, "metallic-roughness", TEXTURE_LINEAR, what,
+                             &textures.metallic_roughness);
     }
-    vkrt_result r = mesh_add_material(w->c, w->m, &mat, texture, VKRT_ERROR_PARSE, w->path, what, &index);
+    if (r == VKRT_OK) r = view_texture(w, &g->emissive_texture, "emissive", TEXTURE_SRGB, what, &textures.emissive);
+    if (r != VKRT_OK) return r;
+    uint32_t index;
+    r = mesh_add_material(w->c, w->m, &mat, &textures, VKRT_ERROR_PARSE, w->path, what, &index);
     if (r != VKRT_OK) return r;
     *out = w->materials[k] = MESH_MATERIAL(index);
     return VKRT_OK;
@@ -747,6 +772,65 @@ static void multiply(const float *a, const float *b, float *out)
         }
 }
 
+static bool finite3(const float *v)
+{
+    return isfinite(v[0]) && isfinite(v[1]) && isfinite(v[2]);
+}
+
+/* A node's KHR_lights_punctual light, placed by the node's world transform: a directional light
+ * shines along the node's -Z axis, a point light sits at its origin. Intensities are taken as
+ * radiometric as they are (candela as W/sr, lux as W/m^2): the tracers have no photometric
+ * scale, and a constant factor would only change the exposure. `range` is a cut-off the
+ * extension lets a renderer ignore; the falloff stays 1/d^2. A spot light is lit as a point
+ * light: its cone is ignored, with a warning. */
+static vkrt_result append_light(gltf_walk *w, const cgltf_light *g, size_t node_index, const float *world)
+{
+    size_t k = (size_t)(g - w->data->lights);
+    char what[64];
+    snprintf(what, sizeof what, "light %zu (node %zu)", k, node_index);
+    bool valid = g->intensity >= 0.0f && isfinite(g->intensity);
+    for (int i = 0; i < 3; i++) valid = valid && g->color[i] >= 0.0f && isfinite(g->color[i]);
+    if (!valid)
+        return core_fail(w->c, VKRT_ERROR_PARSE, "%s: %s: color (%g, %g, %g) and intensity %g must be finite and >= 0",
+                         w->path, what, (double)g->color[0], (double)g->color[1], (double)g->color[2],
+                         (double)g->intensity);
+    vkrt_light light = { .type = VKRT_LIGHT_POINT };
+    for (int i = 0; i < 3; i++) light.color[i] = (float)((double)g->color[i] * g->intensity);
+    if (!finite3(light.color))
+        return core_fail(w->c, VKRT_ERROR_PARSE, "%s: %s: color times intensity %g overflows the float range", w->path,
+                         what, (double)g->intensity);
+    switch (g->type) {
+    case cgltf_light_type_directional: {
+        light.type = VKRT_LIGHT_DIRECTIONAL;
+        double d[3] = { -(double)world[8], -(double)world[9], -(double)world[10] };
+        double length = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+        if (length == 0.0) {
+            /* A node scaled to 0 along its Z axis: the light points nowhere and adds nothing. */
+            core_log(w->c, VKRT_LOG_WARN, "%s: %s: the node's transform collapses its -Z axis, the direction the "
+                     "light shines; the light is ignored", w->path, what);
+            return VKRT_OK;
+        }
+        for (int i = 0; i < 3; i++) light.vector[i] = (float)(d[i] / length); /* NaN for an infinite axis */
+        break;
+    }
+    case cgltf_light_type_spot:
+        if (!w->spot_warned[k]) {
+            w->spot_warned[k] = true;
+            core_log(w->c, VKRT_LOG_WARN, "%s: %s: spot light lit as a point light (its cone is ignored)", w->path,
+                     what);
+        }
+        /* fall through */
+    case cgltf_light_type_point:
+        for (int i = 0; i < 3; i++) light.vector[i] = world[12 + i];
+        break;
+    default:
+        core_log(w->c, VKRT_LOG_WARN, "%s: %s has no type vkrt knows (directional, point or spot); ignored", w->path,
+                 what);
+        return VKRT_OK;
+    }
+    return mesh_add_light(w->c, w->m, &light, VKRT_ERROR_PARSE, w->path, what);
+}
+
 static vkrt_result walk_nodes(gltf_walk *w, const gltf_hierarchy *h, const size_t *roots, size_t root_count)
 {
     core *c = w->c;
@@ -794,6 +878,7 @@ static vkrt_result walk_nodes(gltf_walk *w, const gltf_hierarchy *h, const size_
                         if (r != VKRT_OK) goto done;
                     }
                 }
+                if (node->light && (r = append_light(w, node->light, next, f->world)) != VKRT_OK) goto done;
             }
             if (depth == 0) break;
             walk_frame *top = &stack[depth - 1];
@@ -873,16 +958,19 @@ vkrt_result mesh_load_gltf(core *c, const char *path, mesh *m)
     }
     gltf_walk w = { .c = c, .path = path, .data = data, .m = m, .options = &options };
     w.materials = core_calloc_array(c, data->materials_count ? data->materials_count : 1, sizeof *w.materials);
-    w.textures = core_calloc_array(c, data->textures_count ? data->textures_count : 1, sizeof *w.textures);
-    if (!w.materials || !w.textures) {
+    w.textures = core_calloc_array(c, data->textures_count ? data->textures_count : 1, 2 * sizeof *w.textures);
+    w.spot_warned = core_calloc_array(c, data->lights_count ? data->lights_count : 1, sizeof *w.spot_warned);
+    if (!w.materials || !w.textures || !w.spot_warned) {
         core_free(c, w.materials);
         core_free(c, w.textures);
+        core_free(c, w.spot_warned);
         r = core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "%s: out of memory", path);
         goto done;
     }
     r = walk_nodes(&w, &h, roots, root_count);
     core_free(c, w.materials);
     core_free(c, w.textures);
+    core_free(c, w.spot_warned);
     if (r != VKRT_OK) goto done;
     if (m->tri_count == 0) {
         if (w.skipped_primitives && !w.triangle_primitives)

@@ -212,31 +212,47 @@ static float clamp01(float v)
     return v > 0.0f ? (v < 1.0f ? v : 1.0f) : 0.0f; /* NaN: 0 */
 }
 
+/* The texture file an .mtl names (relative to the .obj), or VKRT_NO_TEXTURE without one. */
+static vkrt_result mtl_texture(obj_state *s, const char *name, texture_encoding encoding, const char *what,
+                               uint32_t *out)
+{
+    *out = VKRT_NO_TEXTURE;
+    if (!name[0]) return VKRT_OK;
+    size_t n = strlen(s->directory) + strlen(name) + 1;
+    char *file = core_alloc(s->c, n);
+    if (!file) return core_fail(s->c, VKRT_ERROR_OUT_OF_MEMORY, "%s: out of memory reading materials", s->path);
+    snprintf(file, n, "%s%s", s->directory, name);
+    vkrt_result r = mesh_add_texture_file(s->c, s->m, file, VKRT_WRAP_REPEAT, VKRT_WRAP_REPEAT, encoding, s->path,
+                                          what, out);
+    core_free(s->c, file);
+    return r;
+}
+
 /* An .mtl material as a vkrt_material: Kd the base colour, d its alpha, Ns (a Phong exponent)
  * the roughness whose GGX lobe has the same width, sqrt(sqrt(2 / (Ns + 2))) (Walter et al.
- * 2007), Ke the emission; OBJ has no metals. map_Kd is read relative to the .obj. */
+ * 2007), Ke the emission. The PBR extension's Pr, where given, is the roughness instead, and its
+ * Pm the metallic (0 without). map_Kd and map_Ke (sRGB) are read relative to the .obj; map_Pr
+ * and map_Pm are not read (vkrt's metallic-roughness texture packs both in one image). */
 static void add_material(obj_state *s, const tinyobj_shim_material *src, size_t index)
 {
     vkrt_material mat = { .base_color = { clamp01(src->diffuse[0]), clamp01(src->diffuse[1]),
                                           clamp01(src->diffuse[2]), clamp01(src->dissolve) } };
     double ns = src->shininess > 0.0f ? (double)src->shininess : 0.0;
-    mat.roughness = clamp01((float)sqrt(sqrt(2.0 / (ns + 2.0))));
+    mat.roughness = src->has_roughness ? clamp01(src->roughness) : clamp01((float)sqrt(sqrt(2.0 / (ns + 2.0))));
+    mat.metallic = clamp01(src->metallic);
     for (int k = 0; k < 3; k++) mat.emissive[k] = src->emission[k] > 0.0f && isfinite(src->emission[k]) ? src->emission[k] : 0.0f;
     char what[96];
     snprintf(what, sizeof what, "material %zu (%.40s)", index, src->name);
-    uint32_t texture = VKRT_NO_TEXTURE, mesh_index = 0;
-    vkrt_result r = VKRT_OK;
-    if (src->diffuse_texture[0]) {
-        size_t n = strlen(s->directory) + strlen(src->diffuse_texture) + 1;
-        char *file = core_alloc(s->c, n);
-        if (!file) r = core_fail(s->c, VKRT_ERROR_OUT_OF_MEMORY, "%s: out of memory reading materials", s->path);
-        if (file) {
-            snprintf(file, n, "%s%s", s->directory, src->diffuse_texture);
-            r = mesh_add_texture_file(s->c, s->m, file, VKRT_WRAP_REPEAT, VKRT_WRAP_REPEAT, s->path, what, &texture);
-            core_free(s->c, file);
-        }
-    }
-    if (r == VKRT_OK) r = mesh_add_material(s->c, s->m, &mat, texture, VKRT_ERROR_PARSE, s->path, what, &mesh_index);
+    mesh_material_textures textures = MESH_NO_TEXTURES;
+    uint32_t mesh_index = 0;
+    vkrt_result r = mtl_texture(s, src->diffuse_texture, TEXTURE_SRGB, what, &textures.base_color);
+    if (r == VKRT_OK) r = mtl_texture(s, src->emissive_texture, TEXTURE_SRGB, what, &textures.emissive);
+    /* map_Ke without Ke (tinyobjloader's 0 0 0): the texture alone is the emission, since a map
+     * scaled by nothing would be the same as none. */
+    if (textures.emissive != VKRT_NO_TEXTURE && mat.emissive[0] == 0.0f && mat.emissive[1] == 0.0f &&
+        mat.emissive[2] == 0.0f)
+        mat.emissive[0] = mat.emissive[1] = mat.emissive[2] = 1.0f;
+    if (r == VKRT_OK) r = mesh_add_material(s->c, s->m, &mat, &textures, VKRT_ERROR_PARSE, s->path, what, &mesh_index);
     if (r != VKRT_OK) {
         fail_in_callback(s, r);
         return;

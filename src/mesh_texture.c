@@ -26,7 +26,8 @@ static void unreadable(core *c, const char *source, const char *what, const char
 }
 
 vkrt_result mesh_add_texture_image(core *c, mesh *m, const void *bytes, size_t size, vkrt_wrap wrap_u, vkrt_wrap wrap_v,
-                                   const char *name, const char *source, const char *what, uint32_t *out_index)
+                                   texture_encoding encoding, const char *name, const char *source, const char *what,
+                                   uint32_t *out_index)
 {
     *out_index = VKRT_NO_TEXTURE;
     stb_image_glue_allocator allocator = { glue_alloc, glue_free, c };
@@ -54,14 +55,15 @@ vkrt_result mesh_add_texture_image(core *c, mesh *m, const void *bytes, size_t s
     } else {
         const vkrt_texture_desc desc = { .rgba8 = pixels, .width = width, .height = height, .wrap_u = wrap_u,
                                          .wrap_v = wrap_v };
-        r = mesh_add_texture(c, m, &desc, VKRT_ERROR_UNSUPPORTED, source, what, out_index);
+        r = mesh_add_texture(c, m, &desc, encoding, VKRT_ERROR_UNSUPPORTED, source, what, out_index);
     }
     stb_image_glue_free(&allocator, pixels);
     return r;
 }
 
 vkrt_result mesh_add_texture_file(core *c, mesh *m, const char *path, vkrt_wrap wrap_u, vkrt_wrap wrap_v,
-                                  const char *source, const char *what, uint32_t *out_index)
+                                  texture_encoding encoding, const char *source, const char *what,
+                                  uint32_t *out_index)
 {
     *out_index = VKRT_NO_TEXTURE;
     FILE *f = fopen(path, "rb");
@@ -88,7 +90,8 @@ vkrt_result mesh_add_texture_file(core *c, mesh *m, const char *path, vkrt_wrap 
         unreadable(c, source, what, path, "the file cannot be read");
         return VKRT_OK;
     }
-    vkrt_result r = mesh_add_texture_image(c, m, bytes, (size_t)length, wrap_u, wrap_v, path, source, what, out_index);
+    vkrt_result r =
+        mesh_add_texture_image(c, m, bytes, (size_t)length, wrap_u, wrap_v, encoding, path, source, what, out_index);
     core_free(c, bytes);
     return r;
 }

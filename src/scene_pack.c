@@ -116,8 +116,8 @@ void scene_pack_surfaces(const mesh *m, vkrt_gpu_surface *surfaces, vkrt_gpu_mat
             .roughness = x->roughness,
             .base_color_texture = m->material_textures[i],
             .alpha_cutoff = x->alpha_cutoff,
-            .metallic_roughness_texture = VKRT_NO_TEXTURE,
-            .emissive_texture = VKRT_NO_TEXTURE,
+            .metallic_roughness_texture = m->material_metallic_roughness_textures[i],
+            .emissive_texture = m->material_emissive_textures[i],
         };
     }
 }

@@ -50,10 +50,9 @@ static float srgb_decode(uint8_t v)
     return (float)(c <= 0.04045 ? c / 12.92 : pow((c + 0.055) / 1.055, 2.4));
 }
 
-void texture_encode_rgba8(const uint8_t *rgba8, uint32_t width, uint32_t height, uint32_t *texels)
+/* lut: the linear value of each 8-bit RGB level; alpha is always level / 255. */
+static void encode(const uint8_t *rgba8, uint32_t width, uint32_t height, const float lut[256], uint32_t *texels)
 {
-    float lut[256];
-    for (int i = 0; i < 256; i++) lut[i] = srgb_decode((uint8_t)i);
     size_t n = (size_t)width * height;
     for (size_t i = 0; i < n; i++) {
         const uint8_t *p = rgba8 + 4 * i;
@@ -62,6 +61,20 @@ void texture_encode_rgba8(const uint8_t *rgba8, uint32_t width, uint32_t height,
         texels[2 * i] = (uint32_t)r | (uint32_t)g << 16;
         texels[2 * i + 1] = (uint32_t)b | (uint32_t)a << 16;
     }
+}
+
+void texture_encode_rgba8(const uint8_t *rgba8, uint32_t width, uint32_t height, uint32_t *texels)
+{
+    float lut[256];
+    for (int i = 0; i < 256; i++) lut[i] = srgb_decode((uint8_t)i);
+    encode(rgba8, width, height, lut, texels);
+}
+
+void texture_encode_rgba8_linear(const uint8_t *rgba8, uint32_t width, uint32_t height, uint32_t *texels)
+{
+    float lut[256];
+    for (int i = 0; i < 256; i++) lut[i] = (float)(i / 255.0); /* rounded once, as alpha */
+    encode(rgba8, width, height, lut, texels);
 }
 
 /* A texture coordinate brought into one period of its wrap mode (mirrors wrap_coordinate in

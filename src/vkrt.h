@@ -155,9 +155,10 @@ typedef enum vkrt_wrap {
     VKRT_WRAP_MIRROR      /* mirrored repeat */
 } vkrt_wrap;
 
-/* An image a material reads: 8-bit RGBA, colour sRGB-encoded as PNG and JPEG store it, rows top
- * to bottom (texture coordinate (0, 0) is the top-left corner, as in glTF); sampled bilinearly
- * at texel centres. */
+/* An image a material reads: 8-bit RGBA, colour sRGB-encoded as PNG and JPEG store it (a
+ * metallic-roughness texture holds linear data instead, as in glTF), alpha linear, rows top to
+ * bottom (texture coordinate (0, 0) is the top-left corner, as in glTF); sampled bilinearly at
+ * texel centres. */
 typedef struct vkrt_texture_desc {
     const uint8_t *rgba8;  /* width * height * 4 bytes (borrowed for the vkrt_scene_create call) */
     uint32_t width, height;/* each 1 .. 16384 */
@@ -177,6 +178,12 @@ typedef struct vkrt_material {
     float alpha_cutoff;  /* 0 (default): opaque, alpha ignored by visibility; in (0, 1]: alpha
                             MASK (glTF): where alpha (base_color[3] times the texture's) is
                             below it the surface is not there and rays pass through */
+    const vkrt_texture_desc *metallic_roughness_texture; /* NULL (default): none; else, at the
+                                                    hit's texture coordinates, its G multiplies
+                                                    roughness and its B metallic; linear data,
+                                                    not sRGB (borrowed for the call) */
+    const vkrt_texture_desc *emissive_texture;   /* NULL (default): none; else its texel (sRGB)
+                                                    multiplies emissive (borrowed for the call) */
 } vkrt_material;
 
 /* The material of a mesh that names none: grey diffuse (base colour 0.8, alpha 1, metallic
@@ -236,7 +243,7 @@ typedef struct vkrt_scene_stats {
     float bounds_min[3], bounds_max[3];  /* of the scene as traced */
     uint32_t materials;            /* materials in the table: the file's (or the meshes') that
                                       triangles use, and the default where one names none */
-    uint32_t textures;             /* base colour textures read */
+    uint32_t textures;             /* textures read (all kinds) */
     bool has_texcoords;            /* some triangle has texture coordinates */
     bool alpha_tested;             /* some material is alpha-masked: every hit is alpha tested
                                       (a pipeline variant of its own; others pay nothing) */

@@ -143,6 +143,18 @@ static vkrt_result op_scene_obj_materials(vkrt_context *ctx, long n)
     return scene_op(ctx, n, &(vkrt_scene_desc){ .path = VKRT_TEST_DATA_DIR "/materials.obj" });
 }
 
+/* KHR_lights_punctual lights on transformed nodes, normalised with the scene. */
+static vkrt_result op_scene_lights_gltf(vkrt_context *ctx, long n)
+{
+    return scene_op(ctx, n, &(vkrt_scene_desc){ .path = VKRT_TEST_DATA_DIR "/lights.gltf" });
+}
+
+/* One embedded PNG decoded twice: as linear metallic-roughness data and as sRGB emission. */
+static vkrt_result op_scene_pbr_gltf(vkrt_context *ctx, long n)
+{
+    return scene_op(ctx, n, &(vkrt_scene_desc){ .path = VKRT_TEST_DATA_DIR "/pbr_textures.gltf" });
+}
+
 /* Two PNG base colour textures, decoded by stb_image through the context's allocator. */
 static vkrt_result op_scene_textured_gltf(vkrt_context *ctx, long n)
 {
@@ -164,7 +176,8 @@ static vkrt_result op_scene_memory(vkrt_context *ctx, long n)
     static const uint8_t checker[16] = { 255, 255, 255, 255, 0, 0, 0, 255, 0, 0, 0, 255, 255, 255, 255, 255 };
     const vkrt_texture_desc tex = { .rgba8 = checker, .width = 2, .height = 2 };
     const vkrt_material gold = { .base_color = { 1.0f, 0.78f, 0.34f, 1.0f }, .metallic = 1.0f, .roughness = 0.3f,
-                                 .base_color_texture = &tex };
+                                 .base_color_texture = &tex, .metallic_roughness_texture = &tex,
+                                 .emissive_texture = &tex };
     vkrt_mesh_desc meshes[2] = {
         { .positions = quad_positions, .vertex_count = 4, .indices = quad_indices, .index_count = 6, .transform = shift,
           .texcoords = quad_texcoords, .material = &gold },
@@ -254,6 +267,8 @@ static void out_of_memory_at_every_cpu_allocation(void)
     oom_every_allocation("scene_create (in-memory meshes)", VKRT_BACKEND_CPU, op_scene_memory);
     oom_every_allocation("scene_create (glTF with PNG textures)", VKRT_BACKEND_CPU, op_scene_textured_gltf);
     oom_every_allocation("scene_create (OBJ with .mtl and a PNG texture)", VKRT_BACKEND_CPU, op_scene_obj_materials);
+    oom_every_allocation("scene_create (glTF with punctual lights)", VKRT_BACKEND_CPU, op_scene_lights_gltf);
+    oom_every_allocation("scene_create (glTF with PBR textures)", VKRT_BACKEND_CPU, op_scene_pbr_gltf);
     oom_every_allocation("render (CPU)", VKRT_BACKEND_CPU, op_render);
     oom_every_allocation("render albedo (CPU)", VKRT_BACKEND_CPU, op_render_albedo);
     oom_every_allocation("render path (CPU)", VKRT_BACKEND_CPU, op_render_path);
@@ -377,13 +392,22 @@ static void scene_misuse_returns_the_exact_code(void)
         { .rgba8 = pixel, .width = 1, .height = 20000 },
         { .rgba8 = pixel, .width = 1, .height = 1, .wrap_v = (vkrt_wrap)7 },
     };
-    for (size_t i = 0; i < sizeof bad_textures / sizeof bad_textures[0]; i++) {
-        vkrt_material mat = vkrt_material_default();
-        mat.base_color_texture = &bad_textures[i];
-        vkrt_mesh_desc md = { .positions = tri_positions, .vertex_count = 3, .material = &mat };
-        CHECK_MSG(make_memory_scene(ctx, &md, &s) == VKRT_ERROR_INVALID_ARGUMENT && s == NULL, "bad texture %zu", i);
-        CHECK_MSG(strstr(vkrt_context_last_error(ctx), "texture"), "bad texture %zu: '%s'", i, vkrt_context_last_error(ctx));
-    }
+    /* Each texture field of the material is checked, and the message names it. */
+    static const char *const texture_fields[] = { "base_color_texture", "metallic_roughness_texture",
+                                                  "emissive_texture" };
+    for (size_t i = 0; i < sizeof bad_textures / sizeof bad_textures[0]; i++)
+        for (size_t f = 0; f < sizeof texture_fields / sizeof texture_fields[0]; f++) {
+            vkrt_material mat = vkrt_material_default();
+            const vkrt_texture_desc **field = f == 0   ? &mat.base_color_texture
+                                              : f == 1 ? &mat.metallic_roughness_texture
+                                                       : &mat.emissive_texture;
+            *field = &bad_textures[i];
+            vkrt_mesh_desc md = { .positions = tri_positions, .vertex_count = 3, .material = &mat };
+            CHECK_MSG(make_memory_scene(ctx, &md, &s) == VKRT_ERROR_INVALID_ARGUMENT && s == NULL, "bad texture %zu",
+                      i);
+            CHECK_MSG(strstr(vkrt_context_last_error(ctx), texture_fields[f]), "bad texture %zu: '%s'", i,
+                      vkrt_context_last_error(ctx));
+        }
     for (size_t i = 0; i < sizeof bad_materials / sizeof bad_materials[0]; i++) {
         vkrt_mesh_desc md = { .positions = tri_positions, .vertex_count = 3, .material = &bad_materials[i].material };
         CHECK_MSG(make_memory_scene(ctx, &md, &s) == VKRT_ERROR_INVALID_ARGUMENT && s == NULL, "bad material %zu", i);
@@ -399,6 +423,15 @@ static void scene_misuse_returns_the_exact_code(void)
     CHECK(vkrt_scene_stats_get(s, NULL) == VKRT_ERROR_INVALID_ARGUMENT);
     CHECK(vkrt_scene_stats_get(NULL, &st) == VKRT_ERROR_INVALID_ARGUMENT);
     CHECK(vkrt_scene_stats_get(s, &st) == VKRT_OK && st.triangles == 1);
+    vkrt_scene_destroy(s);
+    /* Every texture of a material is read, and counted whatever its kind. */
+    static const uint8_t texel[4] = { 255, 128, 64, 255 };
+    const vkrt_texture_desc one = { .rgba8 = texel, .width = 1, .height = 1 };
+    vkrt_material textured = vkrt_material_default();
+    textured.base_color_texture = textured.metallic_roughness_texture = textured.emissive_texture = &one;
+    vkrt_mesh_desc textured_mesh = { .positions = tri_positions, .vertex_count = 3, .material = &textured };
+    CHECK(make_memory_scene(ctx, &textured_mesh, &s) == VKRT_OK);
+    CHECK(vkrt_scene_stats_get(s, &st) == VKRT_OK && st.textures == 3 && st.materials == 1);
     vkrt_scene_destroy(s);
     vkrt_scene_destroy(NULL);
     vkrt_context_destroy(ctx);

@@ -9,6 +9,7 @@
 
 #include "check.h"
 #include "mesh.h"
+#include "scene_pack.h"
 #include "texture.h"
 
 #define MODEL(rel) VKRT_MODELS_DIR "/" rel
@@ -71,7 +72,9 @@ static void remove_temp_dir(void)
                                          "bad_normal.obj", "text.obj", "nul.obj", "empty_file.obj", "mesh.stl",
                                          "missing_bin.gltf", "unknown_ext.gltf", "meshopt.gltf", "truncated.glb",
                                          "truncated_header.glb", "bad_json.gltf", "glb_named.obj", "cycle.gltf",
-                                         "no_scene.gltf", "nan.gltf", "UPPER.OBJ" };
+                                         "no_scene.gltf", "nan.gltf", "UPPER.OBJ", "light_nan.gltf",
+                                         "light_inf.gltf", "light_negative.gltf", "light_overflow.gltf",
+                                         "light_unknown.gltf", "light_flat.gltf" };
     char path[256];
     for (size_t i = 0; i < sizeof names / sizeof names[0]; i++) {
         snprintf(path, sizeof path, "%s/%s", temp_dir(), names[i]);
@@ -848,7 +851,7 @@ static void every_allocation_failure_is_out_of_memory_and_leaks_nothing(void)
     static const struct {
         const char *path; /* NULL: the built-in scene */
         size_t min_size;
-    } cases[] = { { DATA("groups.obj"), 0 }, { MODEL("obj/draco/octagon.obj"), 0 },
+    } cases[] = { { DATA("groups.obj"), 0 }, { MODEL("obj/draco/octagon.obj"), 0 }, { DATA("pbr.obj"), 0 },
                   { MODEL("gltf/draco/Duck/Duck.glb"), GLTF_FAILABLE_SIZE },
                   { MODEL("gltf/draco/CesiumMilkTruck/CesiumMilkTruck.gltf"), GLTF_FAILABLE_SIZE },
                   { MODEL("gltf/draco/CubeScaledInstances/cube_att.gltf"), 256 },
@@ -877,7 +880,7 @@ static void every_allocation_failure_is_out_of_memory_and_leaks_nothing(void)
     }
 }
 
-static char last_warning[512];
+static char last_warning[1024]; /* every warning since it was last emptied, one per line */
 
 /* .mtl materials: Kd (clamped to [0, 1]) and d the base colour, Ns the roughness of the same
  * lobe width, Ke the emission, map_Kd a texture beside the file; `usemtl` switches per face, an
@@ -917,7 +920,8 @@ static void obj_mtl_materials_and_textures_follow_usemtl(void)
 static void on_log(void *user, vkrt_log_level level, const char *message)
 {
     (void)user;
-    if (level == VKRT_LOG_WARN) snprintf(last_warning, sizeof last_warning, "%s", message);
+    size_t used = strlen(last_warning);
+    if (level == VKRT_LOG_WARN) snprintf(last_warning + used, sizeof last_warning - used, "%s\n", message);
 }
 
 /* Base colour textures: read from PNG files beside the glTF, one table entry per texture, each
@@ -943,6 +947,272 @@ static void gltf_base_colour_textures_load_and_a_missing_one_is_a_warning(void)
     CHECK(m.material_count == 1 && m.material_textures[0] == VKRT_NO_TEXTURE && m.materials[0].base_color[2] == 1.0f);
     CHECK_MSG(strstr(last_warning, "does_not_exist.png") && strstr(last_warning, "missing_texture.gltf"),
               "warning: '%s'", last_warning);
+    mesh_destroy(&g_core, &m);
+}
+
+/* ---- lights ---------------------------------------------------------------------------- */
+
+/* text with its first `from` replaced by `to` (malloc'd); the test fails if from is missing. */
+static char *replaced(const char *text, const char *from, const char *to)
+{
+    const char *at = strstr(text, from);
+    CHECK_MSG(at != NULL, "'%s' not in the test file", from);
+    size_t head = at ? (size_t)(at - text) : strlen(text), from_n = at ? strlen(from) : 0;
+    char *out = malloc(strlen(text) + strlen(to) + 1);
+    memcpy(out, text, head);
+    strcpy(out + head, to);
+    strcat(out, text + head + from_n);
+    return out;
+}
+
+static void check_light(const mesh *m, uint32_t i, vkrt_light_type type, const float vector[3], const float color[3],
+                        double eps)
+{
+    if (i >= m->light_count) {
+        CHECK_MSG(i < m->light_count, "light %u of %u", i, m->light_count);
+        return;
+    }
+    const vkrt_light *l = &m->lights[i];
+    CHECK_MSG(l->type == type, "light %u has type %d, expected %d", i, (int)l->type, (int)type);
+    for (int j = 0; j < 3; j++) {
+        CHECK_MSG(fabs(l->vector[j] - vector[j]) <= eps, "light %u vector[%d] is %.9g, expected %.9g", i, j,
+                  (double)l->vector[j], (double)vector[j]);
+        CHECK_MSG(fabs(l->color[j] - color[j]) <= eps, "light %u color[%d] is %.9g, expected %.9g", i, j,
+                  (double)l->color[j], (double)color[j]);
+    }
+}
+
+/* lights.gltf: a directional light on a node rotated 90 degrees about x and scaled by 2 shines
+ * along its rotated -Z, (0, 1, 0), unit length, with color times intensity; a point light under a
+ * translated and scaled parent sits at its world origin, parent * child = (1 + 2 * 0.5, 2, 3);
+ * lights come in node order. Normalising the triangle (0,0,0) (4,0,0) (0,2,0) (centre (2, 1, 0),
+ * scale 1/4) moves the point lights the same way and divides their intensities by 16, so the
+ * irradiance at the scaled distances is unchanged; the directional light stays. */
+static void gltf_punctual_lights_load_at_their_nodes_and_move_with_normalisation(void)
+{
+    mesh m;
+    CHECK_MSG(load(DATA("lights.gltf"), &m) == VKRT_OK, "%s", g_core.last_error);
+    CHECK_EQ_U64(m.tri_count, 1);
+    CHECK_EQ_U64(m.light_count, 3);
+    check_light(&m, 0, VKRT_LIGHT_DIRECTIONAL, (const float[3]){ 0, 1, 0 }, (const float[3]){ 2, 1, 0.5f }, 1e-6);
+    check_light(&m, 1, VKRT_LIGHT_POINT, (const float[3]){ 2, 2, 3 }, (const float[3]){ 10, 10, 10 }, 1e-6);
+    check_light(&m, 2, VKRT_LIGHT_POINT, (const float[3]){ 0, 1, 0 }, (const float[3]){ 0.5f, 1, 1 }, 1e-6);
+    /* The irradiance light 1 gives corner (4, 0, 0), before and after. */
+    const float *v = corner(&m, 0, 1);
+    double d2 = 0.0;
+    for (int j = 0; j < 3; j++) d2 += ((double)v[j] - m.lights[1].vector[j]) * ((double)v[j] - m.lights[1].vector[j]);
+    double before = m.lights[1].color[0] / d2;
+    CHECK(mesh_normalize(&g_core, &m, "lights.gltf") == VKRT_OK);
+    check_light(&m, 0, VKRT_LIGHT_DIRECTIONAL, (const float[3]){ 0, 1, 0 }, (const float[3]){ 2, 1, 0.5f }, 1e-6);
+    check_light(&m, 1, VKRT_LIGHT_POINT, (const float[3]){ 0, 0.25f, 0.75f },
+                (const float[3]){ 0.625f, 0.625f, 0.625f }, 1e-6);
+    check_light(&m, 2, VKRT_LIGHT_POINT, (const float[3]){ -0.5f, 0, 0 },
+                (const float[3]){ 0.5f / 16, 1.0f / 16, 1.0f / 16 }, 1e-6);
+    check_corner(&m, 0, 1, 0.5f, -0.25f, 0, 1e-6);
+    d2 = 0.0;
+    for (int j = 0; j < 3; j++) d2 += ((double)v[j] - m.lights[1].vector[j]) * ((double)v[j] - m.lights[1].vector[j]);
+    CHECK_NEAR(m.lights[1].color[0] / d2, before, 1e-6 * before);
+    mesh_destroy(&g_core, &m);
+    CHECK(m.lights == NULL && m.light_count == 0);
+}
+
+/* A spot light is lit as a point light at its node, with a warning that names the file and the
+ * light; an instanced node would add one light per instance, but one warning per light. */
+static void gltf_spot_light_is_a_point_light_with_a_warning(void)
+{
+    mesh m;
+    last_warning[0] = '\0';
+    CHECK_MSG(load(DATA("lights.gltf"), &m) == VKRT_OK, "%s", g_core.last_error);
+    CHECK(m.light_count == 3 && m.lights[2].type == VKRT_LIGHT_POINT);
+    CHECK_MSG(strstr(last_warning, "lights.gltf") && strstr(last_warning, "light 2") && strstr(last_warning, "spot") &&
+                  strstr(last_warning, "cone"),
+              "warning: '%s'", last_warning);
+    mesh_destroy(&g_core, &m);
+}
+
+/* Values JSON cannot hold as floats (1e39), that cgltf reads as NaN, or that are negative are
+ * VKRT_ERROR_PARSE naming the file and the light; so is a colour whose product with the
+ * intensity overflows. A light of an unknown type, or a directional light on a node that flattens
+ * its -Z axis, is ignored with a warning. */
+static void gltf_lights_with_non_finite_or_negative_values_are_parse_errors(void)
+{
+    size_t size;
+    char *text = read_whole(DATA("lights.gltf"), &size);
+    CHECK(text != NULL);
+    if (!text) return;
+    static const struct {
+        const char *file, *from, *to, *detail;
+    } bad[] = {
+        { "light_nan.gltf", "\"intensity\": 10", "\"intensity\": nan", "light 1 (node 3)" },
+        { "light_inf.gltf", "\"intensity\": 10", "\"intensity\": 1e39", "light 1 (node 3)" },
+        { "light_negative.gltf", "\"intensity\": 10", "\"intensity\": -1", "light 1 (node 3)" },
+        { "light_overflow.gltf", "\"intensity\": 2", "\"intensity\": 1e30, \"color\": [ 1e30, 0, 0 ]",
+          "light 0 (node 1)" },
+    };
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+        char *doc = replaced(text, bad[i].from, bad[i].to);
+        expect_failure(temp_text(bad[i].file, doc), VKRT_ERROR_PARSE, bad[i].detail);
+        free(doc);
+    }
+    static const struct {
+        const char *file, *from, *to, *detail;
+    } ignored[] = {
+        { "light_unknown.gltf", "\"type\": \"point\"", "\"type\": \"area\"", "light 1 (node 3) has no type" },
+        { "light_flat.gltf", "\"scale\": [ 2, 2, 2 ], \"extensions\"", "\"scale\": [ 2, 2, 0 ], \"extensions\"",
+          "collapses its -Z axis" },
+    };
+    for (size_t i = 0; i < sizeof ignored / sizeof ignored[0]; i++) {
+        char *doc = replaced(text, ignored[i].from, ignored[i].to);
+        mesh m;
+        last_warning[0] = '\0';
+        CHECK_MSG(load(temp_text(ignored[i].file, doc), &m) == VKRT_OK, "%s", g_core.last_error);
+        CHECK_EQ_U64(m.light_count, 2);
+        CHECK_MSG(strstr(last_warning, ignored[i].file) && strstr(last_warning, ignored[i].detail), "warning: '%s'",
+                  last_warning);
+        mesh_destroy(&g_core, &m);
+        free(doc);
+    }
+    free(text);
+}
+
+/* mesh_add_light answers the caller's code, naming the source and the light, for every value
+ * that is not a light, and keeps the valid ones in order. */
+static void add_light_validates_type_values_and_direction(void)
+{
+    const struct {
+        vkrt_light light;
+        const char *detail;
+    } bad[] = {
+        { { (vkrt_light_type)5, { 0, 1, 0 }, { 1, 1, 1 } }, "type 5" },
+        { { VKRT_LIGHT_POINT, { 0, NAN, 0 }, { 1, 1, 1 } }, "position" },
+        { { VKRT_LIGHT_DIRECTIONAL, { INFINITY, 0, 0 }, { 1, 1, 1 } }, "direction" },
+        { { VKRT_LIGHT_POINT, { 0, 0, 0 }, { 1, -0.5f, 1 } }, "colour[1]" },
+        { { VKRT_LIGHT_POINT, { 0, 0, 0 }, { 1, 1, NAN } }, "colour[2]" },
+        { { VKRT_LIGHT_DIRECTIONAL, { 0, 0, 0 }, { 1, 1, 1 } }, "without a direction" },
+    };
+    mesh m = { 0 };
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+        core_clear_error(&g_core);
+        CHECK_MSG(mesh_add_light(&g_core, &m, &bad[i].light, VKRT_ERROR_INVALID_ARGUMENT, "src", "light x") ==
+                      VKRT_ERROR_INVALID_ARGUMENT,
+                  "bad light %zu", i);
+        CHECK_MSG(strstr(g_core.last_error, "src: light x") && strstr(g_core.last_error, bad[i].detail),
+                  "bad light %zu: '%s'", i, g_core.last_error);
+    }
+    CHECK_EQ_U64(m.light_count, 0);
+    /* A point light at the origin and a black one are lights; growth keeps them in order. */
+    for (int i = 0; i < 9; i++) {
+        vkrt_light l = { i % 2 ? VKRT_LIGHT_DIRECTIONAL : VKRT_LIGHT_POINT, { 0, 0, (float)(i % 2) },
+                         { (float)i, 0, 0 } };
+        CHECK(mesh_add_light(&g_core, &m, &l, VKRT_ERROR_INVALID_ARGUMENT, "src", "light") == VKRT_OK);
+    }
+    CHECK_EQ_U64(m.light_count, 9);
+    for (uint32_t i = 0; i < m.light_count; i++) CHECK(m.lights[i].color[0] == (float)i);
+    mesh_destroy(&g_core, &m);
+}
+
+/* A point light far from a tiny scene would leave the float range once the scene is scaled up:
+ * refused by name before anything moves. */
+static void normalize_refuses_a_point_light_pushed_beyond_float(void)
+{
+    const float p[9] = { 0, 0, 0, 1e-3f, 0, 0, 0, 1e-3f, 0 };
+    mesh m = { 0 };
+    CHECK(mesh_append_indexed(&g_core, &m, &(mesh_primitive){ .positions = p, .vertex_count = 3 }, "far.gltf",
+                              "mesh 0") == VKRT_OK);
+    const vkrt_light sun = { VKRT_LIGHT_DIRECTIONAL, { 0, -1, 0 }, { 1, 1, 1 } };
+    const vkrt_light far = { VKRT_LIGHT_POINT, { 1e38f, 0, 0 }, { 1, 1, 1 } };
+    CHECK(mesh_add_light(&g_core, &m, &sun, VKRT_ERROR_PARSE, "far.gltf", "light 0") == VKRT_OK);
+    CHECK(mesh_add_light(&g_core, &m, &far, VKRT_ERROR_PARSE, "far.gltf", "light 1") == VKRT_OK);
+    CHECK(mesh_normalize(&g_core, &m, "far.gltf") == VKRT_ERROR_INVALID_GEOMETRY);
+    CHECK_MSG(strstr(g_core.last_error, "far.gltf") && strstr(g_core.last_error, "point light 1"), "message \"%s\"",
+              g_core.last_error);
+    CHECK(m.positions[3] == 1e-3f && m.lights[1].vector[0] == 1e38f && m.lights[1].color[0] == 1.0f);
+    mesh_destroy(&g_core, &m);
+}
+
+/* ---- metallic-roughness and emissive textures ------------------------------------------ */
+
+/* pbr_textures.gltf: one 1x1 image of (255, 128, 64) used as the metallic-roughness texture
+ * (linear data: G 128 is 0.502, not sRGB's 0.216) and as the emissive one (sRGB colour), so it is
+ * decoded once each way; the factors stay factors, and the packed GPU material names both
+ * textures and no base colour one. */
+static void gltf_metallic_roughness_texture_is_linear_and_emissive_srgb(void)
+{
+    mesh m;
+    CHECK_MSG(load(DATA("pbr_textures.gltf"), &m) == VKRT_OK, "%s", g_core.last_error);
+    CHECK_EQ_U64(m.material_count, 1);
+    CHECK_EQ_U64(m.texture_count, 2);
+    if (m.material_count != 1 || m.texture_count != 2) {
+        mesh_destroy(&g_core, &m);
+        return;
+    }
+    const vkrt_material *mat = &m.materials[0];
+    CHECK(mat->metallic == 0.5f && mat->roughness == 0.75f && mat->emissive[0] == 1.0f && mat->emissive[1] == 0.5f &&
+          mat->emissive[2] == 0.25f);
+    CHECK(mat->metallic_roughness_texture == NULL && mat->emissive_texture == NULL);
+    uint32_t mr = m.material_metallic_roughness_textures[0], em = m.material_emissive_textures[0];
+    CHECK(m.material_textures[0] == VKRT_NO_TEXTURE && mr < 2 && em < 2 && mr != em);
+    if (mr >= 2 || em >= 2) {
+        mesh_destroy(&g_core, &m);
+        return;
+    }
+    float linear[4], srgb[4];
+    vkrt_gpu_texture t = { 0, 1, 1, 0 };
+    texture_sample(&t, m.textures[mr].texels, 0.5f, 0.5f, linear);
+    texture_sample(&t, m.textures[em].texels, 0.5f, 0.5f, srgb);
+    CHECK_NEAR(linear[0], 1.0, 0);
+    CHECK_NEAR(linear[1], 128.0 / 255.0, 1e-3); /* roughness */
+    CHECK_NEAR(linear[2], 64.0 / 255.0, 1e-3);  /* metallic */
+    CHECK_NEAR(srgb[1], pow((128.0 / 255.0 + 0.055) / 1.055, 2.4), 1e-3);
+    CHECK_NEAR(srgb[2], pow((64.0 / 255.0 + 0.055) / 1.055, 2.4), 1e-3);
+
+    vkrt_gpu_surface surfaces[1];
+    vkrt_gpu_material gpu[1];
+    vkrt_gpu_texture textures[2];
+    uint32_t texels[2 * 2];
+    CHECK_EQ_U64(scene_texel_count(&m), 2);
+    scene_pack_surfaces(&m, surfaces, gpu, textures, texels);
+    CHECK(gpu[0].base_color_texture == VKRT_NO_TEXTURE);
+    CHECK(gpu[0].metallic_roughness_texture == mr && gpu[0].emissive_texture == em);
+    CHECK(gpu[0].metallic == 0.5f && gpu[0].roughness == 0.75f && gpu[0].emissive.y == 0.5f);
+    mesh_destroy(&g_core, &m);
+}
+
+/* pbr.obj: Pr replaces the Ns roughness where given (Pr 0 included, though Ns says otherwise),
+ * Pm is the metallic, map_Ke is an emissive texture (emission 1 where no Ke scales it, Ke where
+ * one does), and map_Pr and map_Pm are not read (no warning for their missing files). */
+static void obj_pbr_extension_and_emissive_maps_load(void)
+{
+    mesh m;
+    last_warning[0] = '\0';
+    CHECK_MSG(load(DATA("pbr.obj"), &m) == VKRT_OK, "%s", g_core.last_error);
+    CHECK_EQ_U64(m.tri_count, 4);
+    CHECK_EQ_U64(m.material_count, 4);
+    CHECK_EQ_U64(m.texture_count, 2);
+    CHECK_MSG(last_warning[0] == '\0', "warning: '%s'", last_warning);
+    if (m.tri_count != 4 || m.material_count != 4) {
+        mesh_destroy(&g_core, &m);
+        return;
+    }
+    const uint32_t *id = m.material_ids;
+    const vkrt_material *mirror = &m.materials[id[0]], *rough = &m.materials[id[1]], *glow = &m.materials[id[2]],
+                        *tinted = &m.materials[id[3]];
+    CHECK_MSG(mirror->roughness == 0.0f && mirror->metallic == 0.75f, "mirror_metal: roughness %g metallic %g",
+              (double)mirror->roughness, (double)mirror->metallic);
+    CHECK_MSG(fabs(rough->roughness - 0.4) < 1e-6 && rough->metallic == 0.0f, "rough: roughness %g",
+              (double)rough->roughness);
+    CHECK_MSG(fabs(glow->roughness - pow(2.0 / 16.0, 0.25)) < 1e-6, "glowing (Ns 14): roughness %g",
+              (double)glow->roughness);
+    for (int i = 0; i < 2; i++)
+        CHECK(m.material_emissive_textures[id[i]] == VKRT_NO_TEXTURE && m.materials[id[i]].emissive[0] == 0.0f);
+    for (int i = 0; i < 4; i++) {
+        CHECK(m.material_metallic_roughness_textures[id[i]] == VKRT_NO_TEXTURE);
+        CHECK(m.material_textures[id[i]] == VKRT_NO_TEXTURE);
+    }
+    CHECK(m.material_emissive_textures[id[2]] != VKRT_NO_TEXTURE &&
+          m.material_emissive_textures[id[3]] != VKRT_NO_TEXTURE);
+    CHECK(glow->emissive[0] == 1.0f && glow->emissive[1] == 1.0f && glow->emissive[2] == 1.0f);
+    CHECK(tinted->emissive[0] == 2.0f && tinted->emissive[1] == 1.0f && tinted->emissive[2] == 0.5f);
     mesh_destroy(&g_core, &m);
 }
 
@@ -983,6 +1253,13 @@ int main(void)
     RUN(gltf_materials_and_texture_coordinates_load);
     RUN(gltf_base_colour_textures_load_and_a_missing_one_is_a_warning);
     RUN(obj_mtl_materials_and_textures_follow_usemtl);
+    RUN(gltf_punctual_lights_load_at_their_nodes_and_move_with_normalisation);
+    RUN(gltf_spot_light_is_a_point_light_with_a_warning);
+    RUN(gltf_lights_with_non_finite_or_negative_values_are_parse_errors);
+    RUN(add_light_validates_type_values_and_direction);
+    RUN(normalize_refuses_a_point_light_pushed_beyond_float);
+    RUN(gltf_metallic_roughness_texture_is_linear_and_emissive_srgb);
+    RUN(obj_pbr_extension_and_emissive_maps_load);
     RUN(every_allocation_failure_is_out_of_memory_and_leaks_nothing);
     remove_temp_dir();
     return check_exit();

@@ -6,8 +6,11 @@
 
 #include <cstring>
 #include <exception>
+#include <fstream>
 #include <istream>
+#include <map>
 #include <new>
+#include <sstream>
 #include <streambuf>
 #include <string>
 #include <vector>
@@ -24,9 +27,68 @@ public:
     }
 };
 
+// Reads each .mtl file from one directory with tinyobjloader's own parser, and notes which of its
+// materials state Pr: tinyobjloader keeps no such record, and its default roughness, 0, is also a
+// value a file gives (a mirror), so "Pr 0" could not otherwise be told from no Pr at all.
+class material_reader : public tinyobj::MaterialReader {
+public:
+    explicit material_reader(const std::string &directory) : directory_(directory) {}
+
+    bool operator()(const std::string &name, std::vector<tinyobj::material_t> *materials,
+                    std::map<std::string, int> *map, std::string *warn, std::string *err) override
+    {
+        std::ifstream file((directory_ + name).c_str(), std::ios::binary);
+        if (!file) {
+            if (warn) *warn += "Material file [ " + name + " ] not found in " + directory_ + "\n";
+            return false;
+        }
+        std::ostringstream bytes;
+        bytes << file.rdbuf();
+        const std::string text = bytes.str();
+        std::istringstream stream(text);
+        tinyobj::LoadMtl(map, materials, &stream, warn, err);
+        note_roughness(text);
+        has_roughness.resize(materials->size(), false); // in case the two readings ever disagree
+        return true;
+    }
+
+    std::vector<bool> has_roughness; // per material read so far, in tinyobjloader's order
+
+private:
+    // Follows LoadMtl line by line: a material ends at the next `newmtl` (the unnamed one before
+    // the first is dropped) and at the end of the file, which always adds the last.
+    void note_roughness(const std::string &text)
+    {
+        bool named = false, current = false;
+        size_t i = 0;
+        while (i <= text.size()) {
+            size_t end = text.find_first_of("\r\n", i);
+            if (end == std::string::npos) end = text.size();
+            std::string line = text.substr(i, end - i);
+            i = end + 1;
+            line = line.substr(0, std::strlen(line.c_str())); // LoadMtl reads up to a NUL
+            size_t last = line.find_last_not_of(" \t");
+            line = last == std::string::npos ? std::string() : line.substr(0, last + 1);
+            const char *token = line.c_str() + std::strspn(line.c_str(), " \t");
+            auto space = [](char ch) { return ch == ' ' || ch == '\t'; };
+            if (std::strncmp(token, "newmtl", 6) == 0 && space(token[6])) {
+                if (named) has_roughness.push_back(current);
+                named = true;
+                current = false;
+            } else if (token[0] == 'P' && token[1] == 'r' && space(token[2])) {
+                current = true;
+            }
+        }
+        has_roughness.push_back(current);
+    }
+
+    std::string directory_;
+};
+
 struct context {
     const tinyobj_shim_callbacks *callbacks;
     std::vector<tinyobj_shim_corner> corners;
+    const material_reader *materials;
 };
 
 void on_vertex(void *user, tinyobj::real_t x, tinyobj::real_t y, tinyobj::real_t z, tinyobj::real_t)
@@ -88,7 +150,12 @@ void on_materials(void *user, const tinyobj::material_t *materials, int count)
         }
         o.shininess = static_cast<float>(m.shininess);
         o.dissolve = static_cast<float>(m.dissolve);
+        o.metallic = static_cast<float>(m.metallic);
+        o.roughness = static_cast<float>(m.roughness);
+        const std::vector<bool> &has_roughness = static_cast<context *>(user)->materials->has_roughness;
+        o.has_roughness = static_cast<size_t>(i) < has_roughness.size() && has_roughness[static_cast<size_t>(i)];
         o.diffuse_texture = m.diffuse_texname.c_str();
+        o.emissive_texture = m.emissive_texname.c_str();
     }
     cb->materials(cb->user, out.data(), out.size());
 }
@@ -132,7 +199,8 @@ extern "C" tinyobj_shim_status tinyobj_shim_parse(const char *text, size_t size,
         cb.usemtl_cb = on_use_material;
         std::string warn, err;
         // A missing or broken .mtl only adds to warn and err: the faces keep the default material.
-        tinyobj::MaterialFileReader reader(material_dir ? material_dir : "");
+        material_reader reader(material_dir ? material_dir : "");
+        ctx.materials = &reader;
         if (!tinyobj::LoadObjWithCallback(stream, cb, &ctx, material_dir ? &reader : nullptr, &warn, &err)) {
             set_message(message, message_size, err.empty() ? "tinyobjloader failed" : err.c_str());
             return TINYOBJ_SHIM_PARSE_ERROR;

@@ -1,10 +1,11 @@
 /* A C view of tinyobjloader's callback parser (tiny_obj_loader.h is C++). The parser calls
  * back once per statement in file order; nothing is kept, and no C++ exception leaves
- * tinyobj_shim_parse(). `mtllib` files are read by tinyobjloader's own .mtl reader from the
+ * tinyobj_shim_parse(). `mtllib` files are read by tinyobjloader's own .mtl parser from the
  * directory given to tinyobj_shim_parse (a missing one only warns). */
 #ifndef TINYOBJ_SHIM_H
 #define TINYOBJ_SHIM_H
 
+#include <stdbool.h>
 #include <stddef.h>
 
 #ifdef __cplusplus
@@ -25,7 +26,11 @@ typedef struct tinyobj_shim_material {
     float emission[3];            /* Ke */
     float shininess;              /* Ns */
     float dissolve;               /* d (1 - Tr): 1 opaque */
+    float metallic;               /* Pm (the PBR extension), 0 where absent */
+    float roughness;              /* Pr (the PBR extension), valid with has_roughness */
+    bool has_roughness;           /* the material states Pr (0, a mirror, is also the default) */
     const char *diffuse_texture;  /* map_Kd, relative to the .obj's directory; "" for none */
+    const char *emissive_texture; /* map_Ke, likewise */
 } tinyobj_shim_material;
 
 typedef struct tinyobj_shim_callbacks {
