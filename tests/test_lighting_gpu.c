@@ -103,6 +103,51 @@ static void gpu_lighting_matches_cpu_statistically(void)
     vkrt_scene_destroy(sc);
 }
 
+/* Files that bring their own light: the Cornell box (an OBJ whose .mtl gives its ceiling lamp a
+ * Ke), a glTF with metallic-roughness and emissive textures (every feature but punctual
+ * lights), and a glTF with KHR_lights_punctual lights: the device agrees with the CPU. */
+static void gpu_scene_lights_and_textures_match_cpu(void)
+{
+    const struct {
+        const char *path;
+        vkrt_mode mode;
+        uint32_t features; /* must be set */
+        uint32_t lights;   /* 0: any */
+    } files[] = {
+        { VKRT_TEST_DATA_DIR "/cornell.obj", VKRT_MODE_PATH, VKRT_FEATURE_EMITTERS | VKRT_FEATURE_RANDOM, 2 },
+        { VKRT_TEST_DATA_DIR "/pbr_textures.gltf", VKRT_MODE_PATH,
+          VKRT_FEATURE_TEXTURES | VKRT_FEATURE_EMITTERS | VKRT_FEATURE_SPECULAR, 0 },
+        { VKRT_TEST_DATA_DIR "/lights.gltf", VKRT_MODE_SHADED, VKRT_FEATURE_PUNCTUAL, 3 },
+    };
+    for (size_t f = 0; f < sizeof files / sizeof files[0]; f++) {
+        vkrt_scene *sg = NULL, *sc = NULL;
+        vkrt_scene_desc sd = { .path = files[f].path };
+        vkrt_result rg = vkrt_scene_create(gpu, &sd, &sg), rc = vkrt_scene_create(cpu, &sd, &sc);
+        CHECK_MSG(rg == VKRT_OK && rc == VKRT_OK, "%s: %s", files[f].path, vkrt_context_last_error(gpu));
+        vkrt_render_desc d = { .width = 24, .height = 24, .mode = files[f].mode, .spp = 8,
+                               .camera = { .eye = { 0.0f, 0.0f, 1.7f }, .fov_y_degrees = 40 } };
+        float *ge = NULL, *ce = NULL;
+        vkrt_render_stats gs, cs;
+        float *g = sg ? test_render(gpu, sg, d, &ge, &gs) : NULL;
+        float *c = sc ? test_render(cpu, sc, d, &ce, &cs) : NULL;
+        if (g && c) {
+            compare_statistically(files[f].path, g, ge, c, ce, 24 * 24);
+            CHECK_MSG((gs.features & files[f].features) == files[f].features, "%s: features 0x%x", files[f].path, gs.features);
+            CHECK_EQ_U64(gs.features, cs.features);
+            if (files[f].lights) CHECK_EQ_U64(gs.lights, files[f].lights);
+            double sum = 0.0;
+            for (size_t i = 0; i < 24 * 24; i++) sum += g[i * 4] + g[i * 4 + 1] + g[i * 4 + 2];
+            CHECK_MSG(sum > 0.0, "%s: black", files[f].path);
+        }
+        free(g);
+        free(c);
+        free(ge);
+        free(ce);
+        vkrt_scene_destroy(sg);
+        vkrt_scene_destroy(sc);
+    }
+}
+
 /* The emissive furnace on the device: 1 / (1 - albedo) = 2, through NEE, MIS, RR. */
 static void gpu_furnace_converges_to_the_geometric_series(void)
 {
@@ -267,6 +312,7 @@ int main(void)
     int code = check_contexts(on_log, &gpu, &cpu);
     if (code) return code;
     RUN(gpu_lighting_matches_cpu_statistically);
+    RUN(gpu_scene_lights_and_textures_match_cpu);
     RUN(gpu_furnace_converges_to_the_geometric_series);
     RUN(gpu_specialisation_changes_no_pixel);
     RUN(gpu_lighting_bvh_and_naive_give_identical_images);
