@@ -248,12 +248,42 @@ void main()
     uvec2 local = gl_GlobalInvocationID.xy;
     if (local.x >= p.tile_width || local.y >= p.tile_height) return;
     slot = local.y * p.tile_width + local.x;
+    /* A path with nothing left to do (its pixel done, its path ended, no shadow ray pending)
+     * skips the load and store of its 128-byte state. Stages that do run must still clear the
+     * ray slots they own, so the trace passes skip those too. */
+    if (STAGE == VKRT_STAGE_CAMERA || STAGE == VKRT_STAGE_FINISH) {
+        if (accum[slot].done != 0u) {
+            if (STAGE == VKRT_STAGE_CAMERA) {
+                paths[slot].flags = 0u;
+                rays[slot] = NO_RAY;
+            }
+            return;
+        }
+    } else if ((paths[slot].flags & (VKRT_PATH_ACTIVE | VKRT_PATH_PENDING | VKRT_PATH_VERTEX)) == 0u) {
+        if (STAGE == VKRT_STAGE_SHADOW || STAGE == VKRT_STAGE_VERTEX || STAGE == VKRT_STAGE_HIT_SHADOW)
+            shadow_rays[slot] = NO_RAY;
+        if (STAGE == VKRT_STAGE_BOUNCE || STAGE == VKRT_STAGE_VERTEX) rays[slot] = NO_RAY;
+        return;
+    }
     pixel_seed = sampler_pixel_seed(p.tile_x + local.x, p.tile_y + local.y, lighting.seed);
     q = paths[slot];
-    if (STAGE == VKRT_STAGE_CAMERA) stage_camera();
-    else if (STAGE == VKRT_STAGE_HIT) stage_hit();
-    else if (STAGE == VKRT_STAGE_SHADOW) stage_shadow(p.stage_arg);
-    else if (STAGE == VKRT_STAGE_BOUNCE) stage_bounce();
-    else stage_finish();
+    if (STAGE == VKRT_STAGE_CAMERA) {
+        stage_camera();
+    } else if (STAGE == VKRT_STAGE_HIT) {
+        stage_hit();
+    } else if (STAGE == VKRT_STAGE_SHADOW) {
+        stage_shadow(p.stage_arg);
+    } else if (STAGE == VKRT_STAGE_BOUNCE) {
+        stage_bounce();
+    } else if (STAGE == VKRT_STAGE_VERTEX) {
+        stage_hit();
+        stage_shadow(0u);
+        stage_bounce();
+    } else if (STAGE == VKRT_STAGE_HIT_SHADOW) {
+        stage_hit();
+        stage_shadow(0u);
+    } else {
+        stage_finish();
+    }
     paths[slot] = q;
 }

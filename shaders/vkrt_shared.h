@@ -157,6 +157,10 @@ typedef struct vkrt_float3 { float x, y, z; } vkrt_float3;
 #define VKRT_STAGE_BOUNCE 4  /* path: the next direction sampled from the BSDF */
 #define VKRT_STAGE_FINISH 5  /* the last shadow ray resolved, the sample accumulated (the host
                                 reads the tile's accumulation buffer after its last sample) */
+/* Stages fused into one dispatch where they always follow each other, so a path's state is
+ * loaded and stored once instead of once per stage (lavapipe's storage buffers are slow). */
+#define VKRT_STAGE_VERTEX 6  /* path: HIT, SHADOW 0 and BOUNCE */
+#define VKRT_STAGE_HIT_SHADOW 7 /* shaded, ao: HIT and SHADOW 0 */
 
 /* Features of the lighting modes, each compiled into shade.comp only when the scene and the
  * render use it (the same bits as VKRT_FEATURE_* in vkrt.h). */

@@ -233,9 +233,9 @@ static vkrt_result run_sample(wave *w, vkrt_gpu_push push, bool first, uint32_t 
     if ((r = gpu_wavefront_trace(w->vk, w->closest, w->scene, n, &w->device_ms)) != VKRT_OK) return r;
     if (p->mode == VKRT_MODE_PATH) {
         for (;;) {
-            const uint32_t bounce[] = { VKRT_STAGE_HIT, VKRT_STAGE_SHADOW, VKRT_STAGE_BOUNCE };
+            const uint32_t vertex[] = { VKRT_STAGE_VERTEX };
             uint32_t active = 0;
-            if ((r = run_stages(w, bounce, zero, 3, push, true, false, &active)) != VKRT_OK) return r;
+            if ((r = run_stages(w, vertex, zero, 1, push, true, false, &active)) != VKRT_OK) return r;
             if ((r = gpu_wavefront_trace(w->vk, w->shadow, w->scene, n, &w->device_ms)) != VKRT_OK) return r;
             if (active == 0) break;
             if ((r = gpu_wavefront_trace(w->vk, w->closest, w->scene, n, &w->device_ms)) != VKRT_OK) return r;
@@ -245,8 +245,8 @@ static vkrt_result run_sample(wave *w, vkrt_gpu_push push, bool first, uint32_t 
     const vkrt_gpu_lighting *l = &p->lighting;
     const uint32_t shadows = p->mode == VKRT_MODE_AO ? l->ao_samples
                                                      : l->punctual_count + (l->emitter_pick > 0.0f ? 1u : 0u);
-    const uint32_t first_stages[] = { VKRT_STAGE_HIT, VKRT_STAGE_SHADOW };
-    if ((r = run_stages(w, first_stages, zero, shadows ? 2 : 1, push, false, false, NULL)) != VKRT_OK) return r;
+    const uint32_t first_stage[] = { shadows ? VKRT_STAGE_HIT_SHADOW : VKRT_STAGE_HIT };
+    if ((r = run_stages(w, first_stage, zero, 1, push, false, false, NULL)) != VKRT_OK) return r;
     for (uint32_t k = 0; k < shadows; k++) {
         if ((r = gpu_wavefront_trace(w->vk, w->shadow, w->scene, n, &w->device_ms)) != VKRT_OK) return r;
         r = k + 1 < shadows ? run_stage(w, VKRT_STAGE_SHADOW, push, k + 1) : VKRT_OK;
