@@ -636,21 +636,28 @@ static void record_rays(VkCommandBuffer cmd, const vk_trace_pipeline *pipe, cons
                           VK_PIPELINE_STAGE_HOST_BIT, VK_ACCESS_HOST_READ_BIT);
 }
 
-vkrt_result gpu_trace_rays(vk_context *vk, const gpu_scene *scene, const gpu_trace_rays_params *params,
-                           const vkrt_ray *rays, size_t count, vkrt_hit *out_hits)
+/* The pipeline variant of a ray buffer traced from `raygen` (buffer or wavefront). Mode and heat
+ * are unused there: fixed, so every ray call shares one pipeline. */
+static vk_trace_variant ray_variant(const vk_context *vk, const gpu_trace_rays_params *params, uint32_t raygen)
 {
     const bool naive = params->traversal == VKRT_TRAVERSAL_NAIVE;
-    /* Mode and heat are unused in ray mode: fixed, so every ray call shares one pipeline. */
-    vk_trace_variant variant = {
+    return (vk_trace_variant){
         .mode = VKRT_GPU_MODE_ID,
         .traversal = naive ? VKRT_GPU_TRAVERSAL_NAIVE : VKRT_GPU_TRAVERSAL_BVH,
         .heat = VKRT_GPU_HEAT_NODES,
-        .raygen = VKRT_GPU_RAYGEN_BUFFER,
+        .raygen = raygen,
         .isect = gpu_isect(params->intersector),
         .budget = naive ? 0 : vk->trace_budget,
         .alpha = params->alpha_tested,
         .anyhit = params->any_hit,
     };
+}
+
+vkrt_result gpu_trace_rays(vk_context *vk, const gpu_scene *scene, const gpu_trace_rays_params *params,
+                           const vkrt_ray *rays, size_t count, vkrt_hit *out_hits)
+{
+    const bool naive = params->traversal == VKRT_TRAVERSAL_NAIVE;
+    const vk_trace_variant variant = ray_variant(vk, params, VKRT_GPU_RAYGEN_BUFFER);
     vk_trace_pipeline pipe;
     vkrt_result r = vk_trace_pipeline_get(vk, variant, &pipe);
     if (r != VKRT_OK) return r;
@@ -701,16 +708,7 @@ vkrt_result gpu_wavefront_tracer_init(vk_context *vk, gpu_wavefront_tracer *t, c
                                       const gpu_trace_rays_params *params, uint32_t capacity)
 {
     const bool naive = params->traversal == VKRT_TRAVERSAL_NAIVE;
-    vk_trace_variant variant = {
-        .mode = VKRT_GPU_MODE_ID,
-        .traversal = naive ? VKRT_GPU_TRAVERSAL_NAIVE : VKRT_GPU_TRAVERSAL_BVH,
-        .heat = VKRT_GPU_HEAT_NODES,
-        .raygen = VKRT_GPU_RAYGEN_WAVEFRONT,
-        .isect = gpu_isect(params->intersector),
-        .budget = naive ? 0 : vk->trace_budget,
-        .alpha = params->alpha_tested,
-        .anyhit = params->any_hit,
-    };
+    const vk_trace_variant variant = ray_variant(vk, params, VKRT_GPU_RAYGEN_WAVEFRONT);
     vkrt_result r = vk_trace_pipeline_get(vk, variant, &t->pipe);
     t->naive = naive;
     t->budget = variant.budget != 0;

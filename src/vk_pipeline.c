@@ -183,6 +183,35 @@ static vkrt_result ensure_base(vk_context *vk)
     return r;
 }
 
+/* A compute pipeline of `module` with the specialization constants `entries` read from `data`,
+ * through the context's pipeline cache. */
+static vkrt_result create_pipeline(vk_context *vk, VkShaderModule module, VkPipelineLayout layout,
+                                   const VkSpecializationMapEntry *entries, uint32_t entry_count, const void *data,
+                                   size_t size, const char *label, VkPipeline *out)
+{
+    VkSpecializationInfo spec = {
+        .mapEntryCount = entry_count,
+        .pMapEntries = entries,
+        .dataSize = size,
+        .pData = data,
+    };
+    VkComputePipelineCreateInfo info = {
+        .sType = VK_STRUCTURE_TYPE_COMPUTE_PIPELINE_CREATE_INFO,
+        .stage = {
+            .sType = VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO,
+            .stage = VK_SHADER_STAGE_COMPUTE_BIT,
+            .module = module,
+            .pName = "main",
+            .pSpecializationInfo = &spec,
+        },
+        .layout = layout,
+    };
+    VkResult res = vkCreateComputePipelines(vk->device, vk->pipeline_cache, 1, &info, NULL, out);
+    if (res != VK_SUCCESS) return vk_fail(vk, res, "vkCreateComputePipelines");
+    vk_label(vk, VK_OBJECT_TYPE_PIPELINE, (uint64_t)*out, label);
+    return VKRT_OK;
+}
+
 vkrt_result vk_trace_pipeline_get(vk_context *vk, vk_trace_variant variant, vk_trace_pipeline *out)
 {
     vkrt_result r = ensure_base(vk);
@@ -209,27 +238,10 @@ vkrt_result vk_trace_pipeline_get(vk_context *vk, vk_trace_variant variant, vk_t
         { VKRT_SPEC_ALPHA, offsetof(vk_trace_variant, alpha), sizeof(uint32_t) },
         { VKRT_SPEC_ANYHIT, offsetof(vk_trace_variant, anyhit), sizeof(uint32_t) },
     };
-    VkSpecializationInfo spec = {
-        .mapEntryCount = sizeof entries / sizeof entries[0],
-        .pMapEntries = entries,
-        .dataSize = sizeof variant,
-        .pData = &variant,
-    };
-    VkComputePipelineCreateInfo info = {
-        .sType = VK_STRUCTURE_TYPE_COMPUTE_PIPELINE_CREATE_INFO,
-        .stage = {
-            .sType = VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO,
-            .stage = VK_SHADER_STAGE_COMPUTE_BIT,
-            .module = p->trace_module,
-            .pName = "main",
-            .pSpecializationInfo = &spec,
-        },
-        .layout = p->layout,
-    };
     VkPipeline pipeline;
-    VkResult res = vkCreateComputePipelines(vk->device, vk->pipeline_cache, 1, &info, NULL, &pipeline);
-    if (res != VK_SUCCESS) return vk_fail(vk, res, "vkCreateComputePipelines");
-    vk_label(vk, VK_OBJECT_TYPE_PIPELINE, (uint64_t)pipeline, "vkrt trace");
+    r = create_pipeline(vk, p->trace_module, p->layout, entries, sizeof entries / sizeof entries[0], &variant,
+                        sizeof variant, "vkrt trace", &pipeline);
+    if (r != VKRT_OK) return r;
     p->variants[p->count] = variant;
     p->pipelines[p->count++] = pipeline;
     out->pipeline = pipeline;
@@ -273,27 +285,10 @@ vkrt_result vk_shade_pipeline_get(vk_context *vk, vk_shade_variant variant, vk_t
         { VKRT_SPEC_SHADE_MODE, offsetof(vk_shade_variant, mode), sizeof(uint32_t) },
         { VKRT_SPEC_SHADE_FEATURES, offsetof(vk_shade_variant, features), sizeof(uint32_t) },
     };
-    VkSpecializationInfo spec = {
-        .mapEntryCount = sizeof entries / sizeof entries[0],
-        .pMapEntries = entries,
-        .dataSize = sizeof variant,
-        .pData = &variant,
-    };
-    VkComputePipelineCreateInfo info = {
-        .sType = VK_STRUCTURE_TYPE_COMPUTE_PIPELINE_CREATE_INFO,
-        .stage = {
-            .sType = VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO,
-            .stage = VK_SHADER_STAGE_COMPUTE_BIT,
-            .module = p->shade_module,
-            .pName = "main",
-            .pSpecializationInfo = &spec,
-        },
-        .layout = p->shade_layout,
-    };
     VkPipeline pipeline;
-    VkResult res = vkCreateComputePipelines(vk->device, vk->pipeline_cache, 1, &info, NULL, &pipeline);
-    if (res != VK_SUCCESS) return vk_fail(vk, res, "vkCreateComputePipelines (shade)");
-    vk_label(vk, VK_OBJECT_TYPE_PIPELINE, (uint64_t)pipeline, "vkrt shade");
+    r = create_pipeline(vk, p->shade_module, p->shade_layout, entries, sizeof entries / sizeof entries[0], &variant,
+                        sizeof variant, "vkrt shade", &pipeline);
+    if (r != VKRT_OK) return r;
     p->shade_variants[p->shade_count] = variant;
     p->shade_pipelines[p->shade_count++] = pipeline;
     out->pipeline = pipeline;

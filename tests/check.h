@@ -7,10 +7,12 @@
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
+#include <string.h>
 
 #include "vkrt.h"
 
 static int check_failures;
+static unsigned check_validation_logged; /* check_gpu_log */
 
 #define CHECK(x)                                                                        \
     do {                                                                                \
@@ -58,10 +60,34 @@ static int check_failures;
         fprintf(stderr, "%s %s\n", check_failures == check_before_ ? "ok  " : "FAIL", #test); \
     } while (0)
 
+static inline int check_exit(void);
+
+/* The end of a GPU test: no validation message was counted or logged; both contexts destroyed. */
+static inline int check_gpu_finish(vkrt_context *gpu, vkrt_context *cpu)
+{
+    CHECK_EQ_U64(vkrt_context_validation_messages(gpu), 0);
+    vkrt_context_destroy(gpu);
+    vkrt_context_destroy(cpu);
+    CHECK_EQ_U64(check_validation_logged, 0);
+    return check_exit();
+}
+
 static inline int check_exit(void)
 {
     if (check_failures) fprintf(stderr, "%d check(s) failed\n", check_failures);
     return check_failures ? 1 : 0;
+}
+
+/* The log of a GPU test: warnings and errors printed, and messages of the validation layer
+ * counted (any one fails the test in check_gpu_finish). */
+
+static inline void check_gpu_log(void *user, vkrt_log_level level, const char *message)
+{
+    (void)user;
+    if (level <= VKRT_LOG_WARN) {
+        fprintf(stderr, "  [vkrt %s] %s\n", level == VKRT_LOG_ERROR ? "error" : "warning", message);
+        if (strstr(message, "validation")) check_validation_logged++;
+    }
 }
 
 /* The two contexts of a GPU test: the GPU (validation on, the pipeline cache meson names) and

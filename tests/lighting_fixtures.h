@@ -167,6 +167,19 @@ static inline vkrt_scene *test_emissive_furnace(vkrt_context *ctx)
     return s;
 }
 
+/* The mean of the red channel over n pixels and the standard error of that mean (from the
+ * per-pixel standard errors of luminance, which equals red in a grey scene). */
+static inline void test_mean_and_error(const float *img, const float *err, size_t n, double *out_mean, double *out_se)
+{
+    double sum = 0.0, var = 0.0;
+    for (size_t i = 0; i < n; i++) {
+        sum += img[i * 4];
+        var += (double)err[i] * err[i];
+    }
+    *out_mean = sum / (double)n;
+    *out_se = sqrt(var) / (double)n;
+}
+
 static inline vkrt_render_desc test_inside_view(vkrt_mode mode, uint32_t size)
 {
     return (vkrt_render_desc){ .width = size, .height = size, .mode = mode,

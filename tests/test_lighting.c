@@ -178,12 +178,8 @@ static void furnace_inside_an_emitting_sphere_converges_to_the_geometric_series(
     vkrt_render_stats st;
     float *img = test_render(cpu, s, d, &err, &st);
     if (img) {
-        double sum = 0.0, var = 0.0;
-        for (size_t i = 0; i < 16 * 16; i++) {
-            sum += img[i * 4];
-            var += (double)err[i] * err[i];
-        }
-        double mean = sum / 256.0, stderr_mean = sqrt(var) / 256.0;
+        double mean, stderr_mean;
+        test_mean_and_error(img, err, 16 * 16, &mean, &stderr_mean);
         fprintf(stderr, "  furnace inside: mean %.5f (expected 2), standard error %.5f, %u lights\n", mean, stderr_mean,
                 st.lights);
         CHECK_MSG(fabs(mean - 2.0) < 4.0 * stderr_mean + 2e-3, "mean %.5f", mean);

@@ -14,16 +14,6 @@
 #include "vkrt.h"
 
 static vkrt_context *gpu, *cpu;
-static unsigned log_errors;
-
-static void on_log(void *user, vkrt_log_level level, const char *message)
-{
-    (void)user;
-    if (level <= VKRT_LOG_WARN) {
-        fprintf(stderr, "  [vkrt %s] %s\n", level == VKRT_LOG_ERROR ? "error" : "warning", message);
-        if (strstr(message, "validation")) log_errors++;
-    }
-}
 
 static vkrt_scene *builtin(vkrt_context *ctx)
 {
@@ -159,12 +149,8 @@ static void gpu_furnace_converges_to_the_geometric_series(void)
     float *err = NULL;
     float *img = test_render(gpu, s, d, &err, NULL);
     if (img) {
-        double sum = 0.0, var = 0.0;
-        for (size_t i = 0; i < 64; i++) {
-            sum += img[i * 4];
-            var += (double)err[i] * err[i];
-        }
-        double mean = sum / 64.0, se = sqrt(var) / 64.0;
+        double mean, se;
+        test_mean_and_error(img, err, 64, &mean, &se);
         fprintf(stderr, "  furnace inside on the device: mean %.5f (expected 2), standard error %.5f\n", mean, se);
         CHECK_MSG(fabs(mean - 2.0) < 4.0 * se + 2e-3, "mean %.5f", mean);
     }
@@ -309,7 +295,7 @@ static void gpu_shadow_rays_beyond_the_loop_limit_match_cpu(void)
 
 int main(void)
 {
-    int code = check_contexts(on_log, &gpu, &cpu);
+    int code = check_contexts(check_gpu_log, &gpu, &cpu);
     if (code) return code;
     RUN(gpu_lighting_matches_cpu_statistically);
     RUN(gpu_scene_lights_and_textures_match_cpu);
@@ -319,9 +305,5 @@ int main(void)
     RUN(gpu_adaptive_sampling_matches_cpu);
     RUN(gpu_any_hit_queries_agree_with_closest_hit);
     RUN(gpu_shadow_rays_beyond_the_loop_limit_match_cpu);
-    CHECK_EQ_U64(vkrt_context_validation_messages(gpu), 0);
-    vkrt_context_destroy(gpu);
-    vkrt_context_destroy(cpu);
-    CHECK_EQ_U64(log_errors, 0);
-    return check_exit();
+    return check_gpu_finish(gpu, cpu);
 }
