@@ -16,6 +16,7 @@
 #include "lighting_fixtures.h"
 #include "lights.h"
 #include "sampler.h"
+#include "shading.h"
 #include "trace_fixtures.h"
 #include "vkrt.h"
 
@@ -58,6 +59,91 @@ static void sampler_points_are_stratified(void)
     CHECK(a[0] != b[0] && a[0] != c[0]);
 }
 
+static const float floor_quad[12] = { -1, 0, -1, -1, 0, 1, 1, 0, 1, 1, 0, -1 };
+
+/* The BSDF's sampling and evaluation agree: for metals and mixtures of every roughness, the mean
+ * importance-sampling weight (f cos / pdf of sh_bsdf_sample_dir) equals the reflectance that
+ * uniform hemisphere sampling of sh_bsdf_eval measures, within 4 standard errors; the pdf a
+ * sample reports is the one eval gives for its direction; and no lobe reflects more than comes
+ * in. */
+static void bsdf_sampling_matches_its_evaluation(void)
+{
+    const float roughness[] = { 0.1f, 0.3f, 0.6f, 1.0f };
+    const float metallic[] = { 0.0f, 0.5f, 1.0f };
+    const float cos_o[] = { 0.9f, 0.5f, 0.15f };
+    const sh_vec3 n = { 0, 0, 1 };
+    test_rng rng = { 1 };
+    enum { N = 200000 };
+    for (size_t a = 0; a < sizeof roughness / sizeof roughness[0]; a++)
+        for (size_t b = 0; b < sizeof metallic / sizeof metallic[0]; b++)
+            for (size_t c = 0; c < sizeof cos_o / sizeof cos_o[0]; c++) {
+                sh_material m = { { 0.9f, 0.6f, 0.3f }, metallic[b], roughness[a], { 0, 0, 0 } };
+                sh_vec3 wo = { sqrtf(1.0f - cos_o[c] * cos_o[c]), 0.0f, cos_o[c] };
+                double s1 = 0, s1q = 0, s2 = 0, s2q = 0;
+                size_t pdf_mismatch = 0;
+                for (int i = 0; i < N; i++) {
+                    float u[3] = { (float)rng_uniform(&rng), (float)rng_uniform(&rng), (float)rng_uniform(&rng) };
+                    sh_bsdf_sample smp = sh_bsdf_sample_dir(&m, n, n, wo, u);
+                    double w = smp.valid ? sh_luminance(smp.weight) : 0.0;
+                    if (smp.valid) {
+                        float pdf;
+                        sh_bsdf_eval(&m, n, n, wo, smp.dir, &pdf);
+                        if (fabsf(pdf - smp.pdf) > 1e-3f * pdf) pdf_mismatch++;
+                    }
+                    s1 += w, s1q += w * w;
+                    /* Uniform on the hemisphere: pdf 1 / (2 pi). */
+                    double z = rng_uniform(&rng), phi = 6.283185307179586 * rng_uniform(&rng), r = sqrt(1 - z * z);
+                    sh_vec3 wi = { (float)(r * cos(phi)), (float)(r * sin(phi)), (float)z };
+                    float pdf;
+                    double v = sh_luminance(sh_bsdf_eval(&m, n, n, wo, wi, &pdf)) * z * 6.283185307179586;
+                    s2 += v, s2q += v * v;
+                }
+                double m1 = s1 / N, m2 = s2 / N;
+                double e1 = sqrt((s1q / N - m1 * m1) / N), e2 = sqrt((s2q / N - m2 * m2) / N);
+                CHECK_MSG(fabs(m1 - m2) <= 4.0 * sqrt(e1 * e1 + e2 * e2) + 1e-3,
+                          "roughness %.1f metallic %.1f cos %.2f: sampled %.4f +- %.4f, evaluated %.4f +- %.4f",
+                          roughness[a], metallic[b], cos_o[c], m1, e1, m2, e2);
+                CHECK_MSG(m1 <= 1.0 + 4.0 * e1, "reflects %.4f", m1);
+                CHECK_MSG(pdf_mismatch <= N / 1000, "%zu sampled pdfs differ from eval", pdf_mismatch);
+            }
+    /* The mirror: all of it in one direction, weighted by Fresnel (F0 = 1: exactly 1). */
+    sh_material mirror = { { 1, 1, 1 }, 1.0f, 0.0f, { 0, 0, 0 } };
+    sh_vec3 wo = { 0.6f, 0.0f, 0.8f };
+    sh_bsdf_sample smp = sh_bsdf_sample_dir(&mirror, n, n, wo, (float[3]){ 0.3f, 0.7f, 0.5f });
+    CHECK(smp.valid && smp.pdf == 0.0f && fabsf(smp.dir.x + 0.6f) < 1e-6f && fabsf(smp.dir.z - 0.8f) < 1e-6f);
+    CHECK(fabsf(smp.weight.x - 1.0f) < 1e-6f);
+}
+
+/* Alpha-masked surfaces are not there for shadow rays either: a fully cut-away quad between a
+ * point light and the floor casts no shadow, an opaque one does. */
+static void alpha_masked_occluders_cast_no_shadow(void)
+{
+    test_mesh plane = test_quad(floor_quad);
+    const float blocker_corners[12] = { -0.5f, 0.3f, -0.5f, -0.5f, 0.3f, 0.5f, 0.5f, 0.3f, 0.5f, 0.5f, 0.3f, -0.5f };
+    test_mesh blocker = test_quad(blocker_corners);
+    const vkrt_light light = { VKRT_LIGHT_POINT, { 0.0f, 0.6f, 0.0f }, { 1, 1, 1 } };
+    const vkrt_material grey = { .base_color = { 0.8f, 0.8f, 0.8f, 1.0f }, .roughness = 1.0f };
+    float centre[2];
+    for (int cut = 0; cut < 2; cut++) {
+        const vkrt_material veil = { .base_color = { 0.8f, 0.8f, 0.8f, cut ? 0.2f : 1.0f }, .roughness = 1.0f,
+                                     .alpha_cutoff = 0.5f };
+        vkrt_mesh_desc md[2] = { test_mesh_desc(&plane, &grey), test_mesh_desc(&blocker, &veil) };
+        vkrt_scene *s = test_scene(cpu, md, 2);
+        /* Seen from below the blocker, looking down at the floor. */
+        vkrt_render_desc d = { .width = 8, .height = 8, .mode = VKRT_MODE_SHADED, .lights = &light, .light_count = 1,
+                               .camera = { { 0, 0.25f, 0.001f }, { 0, 0, 0 }, { 0, 0, -1 }, 30 } };
+        float *img = s ? test_render(cpu, s, d, NULL, NULL) : NULL;
+        centre[cut] = img ? img[(4 * 8 + 4) * 4] : -1.0f;
+        free(img);
+        vkrt_scene_destroy(s);
+    }
+    double expected = 0.8 / 3.14159265358979323846 / (0.6 * 0.6);
+    CHECK_MSG(centre[0] == 0.0f, "opaque blocker: floor %g", centre[0]);
+    CHECK_MSG(fabs(centre[1] - expected) < 2e-3 * expected, "cut-away blocker: floor %g, unshadowed %g", centre[1], expected);
+    test_mesh_free(&plane);
+    test_mesh_free(&blocker);
+}
+
 /* The camera ray of pixel (x, y) as vkrt documents it (vkrt_gpu_push), in double. */
 static void pixel_dir(const double eye[3], const double target[3], const double up[3], double fov, uint32_t w, uint32_t h,
                       uint32_t x, uint32_t y, double out[3])
@@ -77,7 +163,6 @@ static void pixel_dir(const double eye[3], const double target[3], const double 
     for (int k = 0; k < 3; k++) out[k] = d[k] / dl;
 }
 
-static const float floor_quad[12] = { -1, 0, -1, -1, 0, 1, 1, 0, 1, 1, 0, -1 };
 
 /* A diffuse floor (y = 0, albedo 0.8) under a point light at height 0.5 and, separately, a
  * directional light: each pixel's radiance is albedo / pi * I cos(theta) / d^2, and albedo /
@@ -331,11 +416,13 @@ static void any_hit_visits_fewer_nodes_than_closest_hit(void)
 }
 
 /* A pipeline specialised to the scene's features renders what the full one renders: the
- * built-in scene has no texture and no emitter, so compiling them in changes no pixel. */
+ * built-in scene has no texture and no emitter, the Cornell box no texture, no metal, no point
+ * or directional light and no sky, so compiling them in changes no pixel. */
 static void specialisation_changes_no_pixel(void)
 {
+    for (int file = 0; file < 2; file++) {
     vkrt_scene *s = NULL;
-    vkrt_scene_create(cpu, &(vkrt_scene_desc){ 0 }, &s);
+    vkrt_scene_create(cpu, &(vkrt_scene_desc){ .path = file ? VKRT_TEST_DATA_DIR "/cornell.obj" : NULL }, &s);
     CHECK(s != NULL);
     const vkrt_mode modes[3] = { VKRT_MODE_SHADED, VKRT_MODE_AO, VKRT_MODE_PATH };
     for (int m = 0; s && m < 3; m++) {
@@ -345,13 +432,18 @@ static void specialisation_changes_no_pixel(void)
         d.all_features = true;
         float *b = test_render(cpu, s, d, NULL, &b_st);
         CHECK(b_st.features == VKRT_FEATURE_ALL);
-        CHECK(!(a_st.features & (VKRT_FEATURE_TEXTURES | VKRT_FEATURE_EMITTERS)));
-        if (modes[m] == VKRT_MODE_SHADED) CHECK(!(a_st.features & VKRT_FEATURE_RANDOM));
-        if (a && b) CHECK_MSG(memcmp(a, b, 24 * 24 * 4 * sizeof *a) == 0, "mode %d: specialised image differs", (int)modes[m]);
+        const uint32_t unused = file ? VKRT_FEATURE_TEXTURES | VKRT_FEATURE_SPECULAR | VKRT_FEATURE_PUNCTUAL | VKRT_FEATURE_SKY
+                                     : VKRT_FEATURE_TEXTURES | VKRT_FEATURE_EMITTERS;
+        CHECK_MSG(!(a_st.features & unused), "file %d mode %d: features 0x%x", file, (int)modes[m], a_st.features);
+        if (modes[m] == VKRT_MODE_SHADED && !file) CHECK(!(a_st.features & VKRT_FEATURE_RANDOM));
+        if (a && b)
+            CHECK_MSG(memcmp(a, b, 24 * 24 * 4 * sizeof *a) == 0, "file %d mode %d: specialised image differs", file,
+                      (int)modes[m]);
         free(a);
         free(b);
     }
     vkrt_scene_destroy(s);
+    }
 }
 
 /* Adaptive sampling against a converged reference (1024 samples): with a target of 5% the
@@ -463,11 +555,13 @@ int main(void)
     vkrt_result r = vkrt_context_create(&(vkrt_context_desc){ .backend = VKRT_BACKEND_CPU, .log = on_log }, &cpu);
     if (r != VKRT_OK) return 1;
     RUN(sampler_points_are_stratified);
+    RUN(bsdf_sampling_matches_its_evaluation);
     RUN(point_and_directional_lights_follow_inverse_square_and_cosine);
     RUN(furnace_outside_a_convex_sphere_gives_the_albedo);
     RUN(furnace_inside_an_emitting_sphere_converges_to_the_geometric_series);
     RUN(mirror_reflects_a_known_pattern);
     RUN(ambient_occlusion_sees_only_nearby_occluders);
+    RUN(alpha_masked_occluders_cast_no_shadow);
     RUN(light_table_picks_by_power);
     RUN(any_hit_visits_fewer_nodes_than_closest_hit);
     RUN(specialisation_changes_no_pixel);

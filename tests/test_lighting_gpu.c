@@ -138,6 +138,33 @@ static void gpu_scene_lights_and_textures_match_cpu(void)
     }
 }
 
+/* Shadow rays on the device honour alpha masks (the wavefront's any-hit pass is the alpha-tested
+ * variant): a cut-away quad over a lit floor casts no shadow, as on the CPU. */
+static void gpu_alpha_masked_occluders_cast_no_shadow(void)
+{
+    const float floor_corners[12] = { -1, 0, -1, -1, 0, 1, 1, 0, 1, 1, 0, -1 };
+    const float blocker_corners[12] = { -0.5f, 0.3f, -0.5f, -0.5f, 0.3f, 0.5f, 0.5f, 0.3f, 0.5f, 0.5f, 0.3f, -0.5f };
+    test_mesh plane = test_quad(floor_corners), blocker = test_quad(blocker_corners);
+    const vkrt_light light = { VKRT_LIGHT_POINT, { 0.0f, 0.6f, 0.0f }, { 1, 1, 1 } };
+    const vkrt_material veil = { .base_color = { 0.8f, 0.8f, 0.8f, 0.2f }, .roughness = 1.0f, .alpha_cutoff = 0.5f };
+    vkrt_mesh_desc md[2] = { test_mesh_desc(&plane, NULL), test_mesh_desc(&blocker, &veil) };
+    vkrt_scene *sg = test_scene(gpu, md, 2), *sc = test_scene(cpu, md, 2);
+    vkrt_render_desc d = { .width = 8, .height = 8, .mode = VKRT_MODE_SHADED, .lights = &light, .light_count = 1,
+                           .camera = { { 0, 0.25f, 0.001f }, { 0, 0, 0 }, { 0, 0, -1 }, 30 } };
+    float *g = sg ? test_render(gpu, sg, d, NULL, NULL) : NULL;
+    float *c = sc ? test_render(cpu, sc, d, NULL, NULL) : NULL;
+    for (size_t i = 0; g && c && i < 64; i++) {
+        CHECK_MSG(g[i * 4] > 0.0f, "pixel %zu in shadow", i);
+        CHECK_MSG(fabsf(g[i * 4] - c[i * 4]) <= 1e-5f * c[i * 4], "pixel %zu: %g vs %g", i, g[i * 4], c[i * 4]);
+    }
+    free(g);
+    free(c);
+    vkrt_scene_destroy(sg);
+    vkrt_scene_destroy(sc);
+    test_mesh_free(&plane);
+    test_mesh_free(&blocker);
+}
+
 /* The emissive furnace on the device: 1 / (1 - albedo) = 2, through NEE, MIS, RR. */
 static void gpu_furnace_converges_to_the_geometric_series(void)
 {
@@ -299,6 +326,7 @@ int main(void)
     if (code) return code;
     RUN(gpu_lighting_matches_cpu_statistically);
     RUN(gpu_scene_lights_and_textures_match_cpu);
+    RUN(gpu_alpha_masked_occluders_cast_no_shadow);
     RUN(gpu_furnace_converges_to_the_geometric_series);
     RUN(gpu_specialisation_changes_no_pixel);
     RUN(gpu_lighting_bvh_and_naive_give_identical_images);
