@@ -20,6 +20,7 @@ layout(constant_id = VKRT_SPEC_BUDGET) const uint BUDGET = 0u;
 layout(constant_id = VKRT_SPEC_COUNTERS) const uint COUNTERS = 0u;
 layout(constant_id = VKRT_SPEC_ALPHA) const uint ALPHA = 0u;
 layout(constant_id = VKRT_SPEC_ANYHIT) const uint ANYHIT = 0u;
+layout(constant_id = VKRT_SPEC_TEXTURES) const uint TEXTURES = 0u;
 
 layout(set = 0, binding = VKRT_BINDING_NODES, std430) readonly buffer Nodes {
     vkrt_gpu_node nodes[];
@@ -245,7 +246,7 @@ bool alpha_passes(uint prim, float u, float v)
     vkrt_gpu_material m = materials[f.material];
     if (!(m.alpha_cutoff > 0.0)) return true;
     precise float alpha = m.alpha;
-    if (m.base_color_texture != VKRT_NO_TEXTURE)
+    if (TEXTURES != 0u && m.base_color_texture != VKRT_NO_TEXTURE)
         alpha = alpha * sample_texture(textures[m.base_color_texture], surface_uv(f, u, v)).w;
     return alpha >= m.alpha_cutoff;
 }
@@ -256,7 +257,7 @@ vec4 shade_albedo(vkrt_gpu_surface f, float u, float v)
 {
     vkrt_gpu_material m = materials[f.material];
     precise vec4 colour = vec4(m.base_color, m.alpha);
-    if (m.base_color_texture != VKRT_NO_TEXTURE)
+    if (TEXTURES != 0u && m.base_color_texture != VKRT_NO_TEXTURE)
         colour = colour * sample_texture(textures[m.base_color_texture], surface_uv(f, u, v));
     return colour;
 }

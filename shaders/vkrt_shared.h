@@ -73,6 +73,8 @@ typedef struct vkrt_float3 { float x, y, z; } vkrt_float3;
 #define VKRT_SPEC_COUNTERS 6 /* 1: each pixel's traversal counts written out; 0: no counting code */
 #define VKRT_SPEC_ALPHA 7 /* 1: the scene has alpha-masked materials, hits are alpha tested */
 #define VKRT_SPEC_ANYHIT 8 /* 1: stop at the first hit in (tmin, tmax) (shadow and AO rays) */
+#define VKRT_SPEC_TEXTURES 9 /* 1: some material has a texture (albedo mode, alpha test); 0: none
+                                is sampled, the texture code compiled out */
 
 /* Specialization constants of shade.comp: the stage, the mode, and one switch per feature, so
  * a scene pays only for what it uses (vkrt_render_stats.features lists those compiled in). */

@@ -461,7 +461,7 @@ static vkrt_result render_lighting(vkrt_context *ctx, vkrt_scene *scene, const v
     if (ctx->vk) {
         gpu_integrate_params p = {
             .camera = *camera, .mode = mode, .traversal = traversal, .intersector = d->intersector,
-            .alpha_tested = scene->alpha_tested, .lights = &table, .lighting = lighting, .features = features,
+            .alpha_tested = scene->alpha_tested, .textured = scene->texture_count > 0, .lights = &table, .lighting = lighting, .features = features,
             .out_error = d->out_error, .progress = d->progress, .progress_user = d->progress_user,
         };
         r = gpu_integrate_render(ctx->vk, &scene->gpu, &p, out_rgba, &trace_ms, &counts);
@@ -544,7 +544,8 @@ vkrt_result vkrt_render(vkrt_context *ctx, vkrt_scene *scene, const vkrt_render_
     if (ctx->vk) {
         gpu_trace_params p = {
             .camera = camera, .mode = mode, .traversal = traversal, .heat = heat, .intersector = d.intersector,
-            .counters = d.traversal_counters, .alpha_tested = scene->alpha_tested, .progress = d.progress,
+            .counters = d.traversal_counters, .alpha_tested = scene->alpha_tested,
+            .textured = scene->texture_count > 0, .progress = d.progress,
             .progress_user = d.progress_user,
         };
         r = gpu_trace_render(ctx->vk, &scene->gpu, &p, out_rgba, &trace_ms, &counts);
@@ -592,7 +593,7 @@ vkrt_result vkrt_trace_rays(vkrt_context *ctx, vkrt_scene *scene, const vkrt_tra
     if (ctx->vk) {
         gpu_trace_rays_params p = {
             .traversal = traversal, .intersector = d.intersector, .alpha_tested = scene->alpha_tested,
-            .any_hit = d.any_hit,
+            .textured = scene->texture_count > 0, .any_hit = d.any_hit,
             .progress = d.progress, .progress_user = d.progress_user,
         };
         if ((r = ensure_surfaces(scene, false)) == VKRT_OK) r = gpu_trace_rays(ctx->vk, &scene->gpu, &p, rays, count, out_hits);

@@ -101,7 +101,7 @@ static vkrt_result wave_create(wave *w, uint32_t slots)
     vk_trace_pipeline any;
     vkrt_result r = vk_shade_pipeline_get(vk, (vk_shade_variant){ VKRT_STAGE_CAMERA, p->mode, p->features }, &any);
     gpu_trace_rays_params trace = { .traversal = p->traversal, .intersector = p->intersector,
-                                    .alpha_tested = p->alpha_tested };
+                                    .alpha_tested = p->alpha_tested, .textured = p->textured };
     if (r == VKRT_OK) r = gpu_wavefront_tracer_init(vk, w->closest, w->scene, &trace, slots);
     trace.any_hit = true;
     if (r == VKRT_OK) r = gpu_wavefront_tracer_init(vk, w->shadow, w->scene, &trace, slots);

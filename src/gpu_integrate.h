@@ -16,6 +16,7 @@ typedef struct gpu_integrate_params {
     vkrt_traversal traversal;      /* resolved */
     vkrt_intersector intersector;
     bool alpha_tested;
+    bool textured;                 /* some material has a texture (the alpha test samples them) */
     const light_table *lights;
     vkrt_gpu_lighting lighting;    /* with the mode's fields filled */
     uint32_t features;             /* VKRT_GPU_FEATURE_* */

@@ -554,6 +554,8 @@ vkrt_result gpu_trace_render(vk_context *vk, const gpu_scene *scene, const gpu_t
         /* Naive traversal's counts are known without tracing: no variant for them. */
         .counters = params->counters && !naive,
         .alpha = params->alpha_tested,
+        /* Only albedo and the alpha test sample textures: other modes share one pipeline. */
+        .textures = params->textured && (params->alpha_tested || params->mode == VKRT_MODE_ALBEDO),
     };
     /* Only heatmap reads the heat kind: other modes share one pipeline whatever it is. */
     if (variant.mode != VKRT_GPU_MODE_HEATMAP) variant.heat = VKRT_GPU_HEAT_NODES;
@@ -650,6 +652,7 @@ static vk_trace_variant ray_variant(const vk_context *vk, const gpu_trace_rays_p
         .budget = naive ? 0 : vk->trace_budget,
         .alpha = params->alpha_tested,
         .anyhit = params->any_hit,
+        .textures = params->textured && params->alpha_tested,
     };
 }
 

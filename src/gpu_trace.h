@@ -51,6 +51,7 @@ typedef struct gpu_trace_params {
     vkrt_intersector intersector; /* _DEFAULT: watertight */
     bool counters;             /* fill *out_counts (a pipeline variant that writes them) */
     bool alpha_tested;         /* alpha-test every hit (the surfaces must be uploaded) */
+    bool textured;             /* some material has a texture (albedo, alpha test) */
     vkrt_progress_fn progress; /* may be NULL */
     void *progress_user;
 } gpu_trace_params;
@@ -66,6 +67,7 @@ typedef struct gpu_trace_rays_params {
     bool any_hit;                 /* the first hit found, not the closest */
     vkrt_intersector intersector; /* _DEFAULT: watertight */
     bool alpha_tested;            /* as in gpu_trace_params */
+    bool textured;                /* as in gpu_trace_params */
     vkrt_progress_fn progress;    /* may be NULL; called between submissions */
     void *progress_user;
 } gpu_trace_rays_params;

@@ -237,6 +237,7 @@ vkrt_result vk_trace_pipeline_get(vk_context *vk, vk_trace_variant variant, vk_t
         { VKRT_SPEC_COUNTERS, offsetof(vk_trace_variant, counters), sizeof(uint32_t) },
         { VKRT_SPEC_ALPHA, offsetof(vk_trace_variant, alpha), sizeof(uint32_t) },
         { VKRT_SPEC_ANYHIT, offsetof(vk_trace_variant, anyhit), sizeof(uint32_t) },
+        { VKRT_SPEC_TEXTURES, offsetof(vk_trace_variant, textures), sizeof(uint32_t) },
     };
     VkPipeline pipeline;
     r = create_pipeline(vk, p->trace_module, p->layout, entries, sizeof entries / sizeof entries[0], &variant,

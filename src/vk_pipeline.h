@@ -20,6 +20,7 @@ typedef struct vk_trace_variant {
     uint32_t counters;   /* 1: write each pixel's traversal counts (VKRT_SPEC_COUNTERS) */
     uint32_t alpha;      /* 1: alpha-test hits (VKRT_SPEC_ALPHA) */
     uint32_t anyhit;     /* 1: stop at the first hit (VKRT_SPEC_ANYHIT) */
+    uint32_t textures;   /* 1: the scene has textures (VKRT_SPEC_TEXTURES) */
 } vk_trace_variant;
 
 typedef struct vk_trace_pipeline {
