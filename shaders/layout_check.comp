@@ -66,7 +66,7 @@ void main()
     put(g.seed); put(g.spp);
     vkrt_gpu_path q = paths[1];
     put(q.throughput); put(q.flags); put(q.radiance); put(q.bsdf_pdf); put(q.position); put(q.depth); put(q.normal);
-    put(q.tri); put(q.geo_normal); put(q.metallic); put(q.albedo); put(q.roughness); put(q.wo); put(q.pad0);
+    put(q.tri); put(q.geo_normal); put(q.metallic); put(q.albedo); put(q.roughness); put(q.wo); put(q.shadow_lane);
     put(q.pending); put(q.rng_dim);
     vkrt_gpu_accum a = accums[1];
     put(a.sum); put(a.samples); put(a.lum_sum); put(a.lum_sq_sum); put(a.done); put(a.alpha);

@@ -26,12 +26,15 @@ layout(set = 0, binding = VKRT_SHADE_BINDING_RAYS, std430) buffer Rays { vkrt_gp
 layout(set = 0, binding = VKRT_SHADE_BINDING_HITS, std430) readonly buffer Hits { vkrt_gpu_hit hits[]; };
 layout(set = 0, binding = VKRT_SHADE_BINDING_SHADOW_RAYS, std430) buffer ShadowRays { vkrt_gpu_ray shadow_rays[]; };
 layout(set = 0, binding = VKRT_SHADE_BINDING_SHADOW_HITS, std430) readonly buffer ShadowHits { vkrt_gpu_hit shadow_hits[]; };
-/* active_count: reset by the host before a stage that counts; the ray counts run over the render. */
+/* active_count and queue_count: reset by the host before a stage that counts (the paths that go
+ * on, and the entries of the output queue); the ray counts run over the render. */
 layout(set = 0, binding = VKRT_SHADE_BINDING_ACTIVE, std430) buffer Active {
     uint active_count;
+    uint queue_count;
     uint shadow_count;
     uint bounce_count;
 };
+layout(set = 0, binding = VKRT_SHADE_BINDING_QUEUE, std430) buffer Queue { uint queue[]; };
 layout(set = 0, binding = VKRT_SHADE_BINDING_LIGHTING, std430) readonly buffer Lighting { vkrt_gpu_lighting lighting; };
 layout(push_constant, std430) uniform Push {
     vkrt_gpu_push p;
@@ -47,7 +50,8 @@ const uint ISECT = VKRT_GPU_ISECT_WATERTIGHT;
 /* A ray the trace passes skip (a zero direction misses at once). */
 const vkrt_gpu_ray NO_RAY = vkrt_gpu_ray(vec3(0.0), 0.0, vec3(0.0), 0.0);
 
-uint slot;
+uint slot;   /* the pixel within the tile: its path and accumulation */
+uint lane;   /* its place in this stage's queue: its rays and hits */
 uint pixel_seed;
 vkrt_gpu_path q;
 
@@ -68,7 +72,7 @@ void resolve_pending()
 {
     if ((q.flags & VKRT_PATH_PENDING) == 0u) return;
     q.flags &= ~VKRT_PATH_PENDING;
-    if (shadow_hits[slot].tri == NO_PRIM) q.radiance = q.radiance + q.pending;
+    if (shadow_hits[q.shadow_lane].tri == NO_PRIM) q.radiance = q.radiance + q.pending;
 }
 
 /* Every invocation writes its shadow ray slot: a stale ray from an earlier stage must not be
@@ -78,7 +82,8 @@ void set_pending(vec3 contribution, vkrt_gpu_ray ray)
     if (!(max3(contribution) > 0.0)) return;
     q.pending = contribution;
     q.flags |= VKRT_PATH_PENDING;
-    shadow_rays[slot] = ray;
+    q.shadow_lane = lane;
+    shadow_rays[lane] = ray;
     atomicAdd(shadow_count, 1u);
 }
 
@@ -87,31 +92,33 @@ material_sample vertex_material()
     return material_sample(q.albedo, q.metallic, q.roughness, vec3(0.0));
 }
 
+/* Appends this path to the output queue, its next ray at its new lane. */
+void enqueue(vkrt_gpu_ray next)
+{
+    uint k = atomicAdd(queue_count, 1u);
+    queue[p.tri_end + k] = slot;
+    rays[k] = next;
+}
+
 void stage_camera()
 {
-    if (accum[slot].done != 0u) {
-        q.flags = 0u;
-        rays[slot] = NO_RAY;
-        return;
-    }
     q.throughput = vec3(1.0);
     q.flags = VKRT_PATH_ACTIVE;
     q.radiance = vec3(0.0);
     q.bsdf_pdf = 0.0;
     q.depth = 0u;
     q.rng_dim = 0u;
-    uvec2 local = gl_GlobalInvocationID.xy;
-    ray r = camera_ray(p, p.tile_x + local.x, p.tile_y + local.y);
-    rays[slot] = vkrt_gpu_ray(r.origin, 0.0, r.dir, 0.0);
-    atomicAdd(active_count, 1u);
+    ray r = camera_ray(p, p.tile_x + slot % p.tile_width, p.tile_y + slot / p.tile_width);
+    q.wo = -r.dir;
+    enqueue(vkrt_gpu_ray(r.origin, 0.0, r.dir, 0.0));
 }
 
 void stage_hit()
 {
     resolve_pending();
     if ((q.flags & VKRT_PATH_ACTIVE) == 0u) return;
-    vkrt_gpu_hit h = hits[slot];
-    vec3 dir = rays[slot].dir;
+    vkrt_gpu_hit h = hits[lane];
+    vec3 dir = -q.wo;
     if (h.tri == NO_PRIM) {
         q.flags &= ~(VKRT_PATH_ACTIVE | VKRT_PATH_VERTEX);
         if (MODE == VKRT_GPU_MODE_AO) {
@@ -162,7 +169,7 @@ void light_contribution(uint index, float pick, float u0, float u1, bool mis)
 void stage_shadow(uint k)
 {
     resolve_pending();
-    shadow_rays[slot] = NO_RAY;
+    shadow_rays[lane] = NO_RAY;
     if ((q.flags & VKRT_PATH_VERTEX) == 0u) return;
     if (MODE == VKRT_GPU_MODE_AO) {
         vec4 u = next4();
@@ -187,10 +194,8 @@ void stage_shadow(uint k)
     }
 }
 
-void stage_bounce()
+void bounce_direction()
 {
-    rays[slot] = NO_RAY;
-    if ((q.flags & VKRT_PATH_ACTIVE) == 0u) return;
     q.flags &= ~VKRT_PATH_VERTEX;
     if (q.depth > lighting.max_bounces) {
         q.flags &= ~VKRT_PATH_ACTIVE;
@@ -205,6 +210,7 @@ void stage_bounce()
     }
     q.throughput = q.throughput * b.weight;
     q.bsdf_pdf = b.pdf;
+    q.wo = -b.dir;
     if (q.depth >= 3u) {
         float keep = max3(q.throughput);
         keep = keep < 0.95 ? keep : 0.95;
@@ -214,9 +220,21 @@ void stage_bounce()
         }
         q.throughput = q.throughput * (1.0 / keep);
     }
-    rays[slot] = vkrt_gpu_ray(ray_offset(q.position, q.geo_normal), 0.0, b.dir, 0.0);
-    atomicAdd(active_count, 1u);
-    atomicAdd(bounce_count, 1u);
+}
+
+/* The next direction from the BSDF, then Russian roulette. A path that goes on is queued with
+ * its ray; one that ends with a shadow ray pending is queued without one, so the next stage
+ * resolves it before the shadow lanes are reused. */
+void stage_bounce()
+{
+    if ((q.flags & VKRT_PATH_ACTIVE) != 0u) bounce_direction();
+    if ((q.flags & VKRT_PATH_ACTIVE) != 0u) {
+        enqueue(vkrt_gpu_ray(ray_offset(q.position, q.geo_normal), 0.0, -q.wo, 0.0));
+        atomicAdd(active_count, 1u);
+        atomicAdd(bounce_count, 1u);
+    } else if ((q.flags & VKRT_PATH_PENDING) != 0u) {
+        enqueue(NO_RAY);
+    }
 }
 
 void stage_finish()
@@ -245,27 +263,20 @@ void stage_finish()
 
 void main()
 {
-    uvec2 local = gl_GlobalInvocationID.xy;
-    if (local.x >= p.tile_width || local.y >= p.tile_height) return;
-    slot = local.y * p.tile_width + local.x;
-    /* A path with nothing left to do (its pixel done, its path ended, no shadow ray pending)
-     * skips the load and store of its 128-byte state. Stages that do run must still clear the
-     * ray slots they own, so the trace passes skip those too. */
     if (STAGE == VKRT_STAGE_CAMERA || STAGE == VKRT_STAGE_FINISH) {
-        if (accum[slot].done != 0u) {
-            if (STAGE == VKRT_STAGE_CAMERA) {
-                paths[slot].flags = 0u;
-                rays[slot] = NO_RAY;
-            }
-            return;
-        }
-    } else if ((paths[slot].flags & (VKRT_PATH_ACTIVE | VKRT_PATH_PENDING | VKRT_PATH_VERTEX)) == 0u) {
-        if (STAGE == VKRT_STAGE_SHADOW || STAGE == VKRT_STAGE_VERTEX || STAGE == VKRT_STAGE_HIT_SHADOW)
-            shadow_rays[slot] = NO_RAY;
-        if (STAGE == VKRT_STAGE_BOUNCE || STAGE == VKRT_STAGE_VERTEX) rays[slot] = NO_RAY;
-        return;
+        /* Every pixel of the tile; one done sampling has nothing to do. */
+        uvec2 local = gl_GlobalInvocationID.xy;
+        if (local.x >= p.tile_width || local.y >= p.tile_height) return;
+        slot = local.y * p.tile_width + local.x;
+        if (accum[slot].done != 0u) return;
+        lane = 0u;
+    } else {
+        /* The queued paths: a 1D dispatch over the input queue's lanes. */
+        lane = gl_WorkGroupID.x * (VKRT_TRACE_GROUP_X * VKRT_TRACE_GROUP_Y) + gl_LocalInvocationIndex;
+        if (lane >= p.tri_total) return;
+        slot = queue[p.tri_first + lane];
     }
-    pixel_seed = sampler_pixel_seed(p.tile_x + local.x, p.tile_y + local.y, lighting.seed);
+    pixel_seed = sampler_pixel_seed(p.tile_x + slot % p.tile_width, p.tile_y + slot / p.tile_width, lighting.seed);
     q = paths[slot];
     if (STAGE == VKRT_STAGE_CAMERA) {
         stage_camera();

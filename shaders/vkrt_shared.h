@@ -60,7 +60,8 @@ typedef struct vkrt_float3 { float x, y, z; } vkrt_float3;
 #define VKRT_SHADE_BINDING_SHADOW_HITS 11
 #define VKRT_SHADE_BINDING_ACTIVE 12     /* one uint: pixels sampling / paths still going */
 #define VKRT_SHADE_BINDING_LIGHTING 13   /* one vkrt_gpu_lighting */
-#define VKRT_SHADE_BINDING_COUNT 14
+#define VKRT_SHADE_BINDING_QUEUE 14      /* two queues of a tile's pixel slots (uint), in and out */
+#define VKRT_SHADE_BINDING_COUNT 15
 
 /* Specialization constant ids: features a render does not use are compiled out instead of
  * branched over (lavapipe pays nearly full price for an `if` that is false everywhere). */
@@ -152,7 +153,11 @@ typedef struct vkrt_float3 { float x, y, z; } vkrt_float3;
 
 /* Stages of shade.comp, in the order one sample of a tile runs them (vkrt_gpu_push.stage_arg
  * carries the light or AO ray index of VKRT_STAGE_SHADOW). A pixel's sample index is the count
- * of samples its accumulation holds. */
+ * of samples its accumulation holds. CAMERA and FINISH run over every pixel of the tile; the
+ * others over a queue of the pixels still tracing (compaction: a dispatch and a trace pass
+ * cost what the live paths need, not the tile), each queued path's rays and hits at its lane,
+ * its index in the queue. The push constants say where: tri_first is the input queue's offset in
+ * the queue buffer, tri_end the output queue's, tri_total the lanes of the input queue. */
 #define VKRT_STAGE_CAMERA 1  /* primary rays of the pixels still sampling */
 #define VKRT_STAGE_HIT 2     /* closest hits: emission, the sky on a miss, the vertex stored */
 #define VKRT_STAGE_SHADOW 3  /* one shadow or AO ray from the stored vertex */
@@ -363,7 +368,7 @@ VKRT_STRUCT(vkrt_gpu_path) {
     VKRT_FLOAT3 albedo;      /* offset 80; base colour at the vertex */
     float roughness;         /* offset 92 */
     VKRT_FLOAT3 wo;          /* offset 96; unit direction back along the incoming ray */
-    float pad0;              /* offset 108 */
+    VKRT_UINT shadow_lane;   /* offset 108; where its pending shadow ray was traced */
     VKRT_FLOAT3 pending;     /* offset 112; the shadow ray's contribution if it is unoccluded */
     VKRT_UINT rng_dim;       /* offset 124; next sampler dimension */
 };
@@ -372,6 +377,8 @@ VKRT_STRUCT(vkrt_gpu_path) {
 #define VKRT_PATH_VERTEX 2u   /* a vertex is stored (the last ray hit a surface) */
 #define VKRT_PATH_PENDING 4u  /* a shadow ray's contribution waits for its visibility */
 #define VKRT_PATH_PRIMARY_HIT 8u /* the primary ray hit a surface (alpha of the pixel) */
+/* The extension ray's direction is -wo from the moment the ray is made (CAMERA, BOUNCE), so a
+ * stage never reads the ray buffer that the same dispatch writes for the next pass. */
 
 /* One pixel's accumulated samples, 32 bytes: the radiance sum, and the luminance sum and sum
  * of squares from which adaptive sampling estimates the error of the mean. */

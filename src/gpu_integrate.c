@@ -10,9 +10,11 @@
 #define WAVE_TILE 256u
 _Static_assert(WAVE_TILE * WAVE_TILE <= VKRT_RESUME_RAY_CHUNK, "a wavefront tile must fit the continuation buffers");
 
-/* The counters shade.comp's Active block holds. */
+/* The counters shade.comp's Active block holds: the first two are reset before each batch. */
 typedef struct wave_counters {
-    uint32_t active, shadow_rays, bounce_rays;
+    uint32_t active;      /* paths that go on after the batch */
+    uint32_t queued;      /* entries of its output queue */
+    uint32_t shadow_rays, bounce_rays;
 } wave_counters;
 
 typedef struct wave {
@@ -20,7 +22,8 @@ typedef struct wave {
     const gpu_scene *scene;
     const gpu_integrate_params *params;
     gpu_wavefront_tracer *closest, *shadow;
-    vk_buffer paths, accum, lights, lighting, counters;
+    vk_buffer paths, accum, lights, lighting, counters, queue;
+    uint32_t slots;
     VkDescriptorPool pool;
     VkDescriptorSet set;
     VkDescriptorSetLayout set_layout;
@@ -64,6 +67,7 @@ static vkrt_result create_descriptor_set(wave *w)
         [VKRT_SHADE_BINDING_SHADOW_HITS] = gpu_wavefront_hits(w->shadow),
         [VKRT_SHADE_BINDING_ACTIVE] = w->counters.buffer,
         [VKRT_SHADE_BINDING_LIGHTING] = w->lighting.buffer,
+        [VKRT_SHADE_BINDING_QUEUE] = w->queue.buffer,
     };
     VkDescriptorBufferInfo infos[VKRT_SHADE_BINDING_COUNT];
     VkWriteDescriptorSet writes[VKRT_SHADE_BINDING_COUNT];
@@ -88,6 +92,7 @@ static void wave_destroy(wave *w)
     vk_buffer_destroy(vk, &w->lights);
     vk_buffer_destroy(vk, &w->lighting);
     vk_buffer_destroy(vk, &w->counters);
+    vk_buffer_destroy(vk, &w->queue);
 }
 
 static vkrt_result wave_create(wave *w, uint32_t slots)
@@ -112,6 +117,10 @@ static vkrt_result wave_create(wave *w, uint32_t slots)
     if (r == VKRT_OK)
         r = vk_buffer_create(vk, (VkDeviceSize)slots * sizeof(vkrt_gpu_accum), storage, VK_MEMORY_READBACK,
                              "vkrt accumulation", &w->accum);
+    if (r == VKRT_OK)
+        r = vk_buffer_create(vk, (VkDeviceSize)slots * 2 * sizeof(uint32_t), storage, VK_MEMORY_DEVICE, "vkrt path queues",
+                             &w->queue);
+    w->slots = slots;
     const uint32_t light_count = p->lights->count ? p->lights->count : 1;
     if (r == VKRT_OK)
         r = vk_buffer_create(vk, (VkDeviceSize)light_count * sizeof(vkrt_gpu_light), storage, VK_MEMORY_DEVICE,
@@ -165,7 +174,7 @@ static vkrt_result batch_begin(wave *w, stage_batch *b, bool count_active, bool 
     b->count_active = count_active;
     record_full_barrier(b->cmd);
     if (clear_accum) vkCmdFillBuffer(b->cmd, w->accum.buffer, 0, VK_WHOLE_SIZE, 0);
-    if (count_active) vkCmdFillBuffer(b->cmd, w->counters.buffer, 0, sizeof(uint32_t), 0);
+    if (count_active) vkCmdFillBuffer(b->cmd, w->counters.buffer, 0, 2 * sizeof(uint32_t), 0);
     return VKRT_OK;
 }
 
@@ -179,19 +188,22 @@ static vkrt_result batch_stage(wave *w, stage_batch *b, uint32_t stage, vkrt_gpu
     vkCmdBindPipeline(b->cmd, VK_PIPELINE_BIND_POINT_COMPUTE, pipe.pipeline);
     vkCmdBindDescriptorSets(b->cmd, VK_PIPELINE_BIND_POINT_COMPUTE, pipe.layout, 0, 1, &w->set, 0, NULL);
     vkCmdPushConstants(b->cmd, pipe.layout, VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof push, &push);
-    vkCmdDispatch(b->cmd, (push.tile_width + VKRT_TRACE_GROUP_X - 1) / VKRT_TRACE_GROUP_X,
-                  (push.tile_height + VKRT_TRACE_GROUP_Y - 1) / VKRT_TRACE_GROUP_Y, 1);
+    if (stage == VKRT_STAGE_CAMERA || stage == VKRT_STAGE_FINISH)
+        vkCmdDispatch(b->cmd, (push.tile_width + VKRT_TRACE_GROUP_X - 1) / VKRT_TRACE_GROUP_X,
+                      (push.tile_height + VKRT_TRACE_GROUP_Y - 1) / VKRT_TRACE_GROUP_Y, 1);
+    else if (push.tri_total > 0)
+        vkCmdDispatch(b->cmd, (push.tri_total + VKRT_TRACE_GROUP_SIZE - 1) / VKRT_TRACE_GROUP_SIZE, 1, 1);
     return VKRT_OK;
 }
 
-/* Submits and waits; *out_active (may be NULL) gets the count the batch's stages made. */
-static vkrt_result batch_submit(wave *w, stage_batch *b, uint32_t *out_active)
+/* Submits and waits; *out (may be NULL) gets the counters the batch's stages made. */
+static vkrt_result batch_submit(wave *w, stage_batch *b, wave_counters *out)
 {
     record_full_barrier(b->cmd);
     vkrt_result r = vk_commands_submit_wait(w->vk, b->cmd);
-    if (r == VKRT_OK && out_active) {
+    if (r == VKRT_OK && out) {
         r = vk_buffer_invalidate(w->vk, &w->counters);
-        *out_active = r == VKRT_OK ? ((const wave_counters *)w->counters.mapped)->active : 0;
+        if (r == VKRT_OK) *out = *(const wave_counters *)w->counters.mapped;
     }
     return r;
 }
@@ -210,7 +222,7 @@ static vkrt_result run_stage(wave *w, uint32_t stage, vkrt_gpu_push push, uint32
 
 /* Records stages[0 .. count) into one batch and submits it. */
 static vkrt_result run_stages(wave *w, const uint32_t *stages, const uint32_t *args, uint32_t count, vkrt_gpu_push push,
-                              bool count_active, bool clear_accum, uint32_t *out_active)
+                              bool count_active, bool clear_accum, wave_counters *out)
 {
     stage_batch b;
     vkrt_result r = batch_begin(w, &b, count_active, clear_accum);
@@ -219,37 +231,58 @@ static vkrt_result run_stages(wave *w, const uint32_t *stages, const uint32_t *a
         if (b.cmd) vkFreeCommandBuffers(w->vk->device, w->vk->command_pool, 1, &b.cmd);
         return r;
     }
-    return batch_submit(w, &b, out_active);
+    return batch_submit(w, &b, out);
 }
 
-/* One sample of every pixel of the tile still sampling; *out_started: how many were. */
+/* The push constants of a stage over the queue at offset `in` with `lanes` entries, writing the
+ * queue at offset `out`. */
+static vkrt_gpu_push queue_push(vkrt_gpu_push push, uint32_t in, uint32_t out, uint32_t lanes)
+{
+    push.tri_first = in;
+    push.tri_end = out;
+    push.tri_total = lanes;
+    return push;
+}
+
+/* One sample of every pixel of the tile still sampling; *out_started: how many were. The
+ * queue buffer holds two queues, swapped after each bounce. */
 static vkrt_result run_sample(wave *w, vkrt_gpu_push push, bool first, uint32_t *out_started)
 {
     const gpu_integrate_params *p = w->params;
-    const uint32_t n = push.tile_width * push.tile_height;
-    const uint32_t camera[] = { VKRT_STAGE_CAMERA }, zero[] = { 0, 0, 0 };
-    vkrt_result r = run_stages(w, camera, zero, 1, push, true, first, out_started);
-    if (r != VKRT_OK || *out_started == 0) return r;
-    if ((r = gpu_wavefront_trace(w->vk, w->closest, w->scene, n, &w->device_ms)) != VKRT_OK) return r;
+    const uint32_t camera[] = { VKRT_STAGE_CAMERA }, zero[] = { 0 };
+    uint32_t in = 0, out = w->slots;
+    wave_counters c = { 0 };
+    vkrt_result r = run_stages(w, camera, zero, 1, queue_push(push, 0, in, 0), true, first, &c);
+    *out_started = c.queued;
+    if (r != VKRT_OK || c.queued == 0) return r;
+    uint32_t lanes = c.queued;
+    if ((r = gpu_wavefront_trace(w->vk, w->closest, w->scene, lanes, &w->device_ms)) != VKRT_OK) return r;
     if (p->mode == VKRT_MODE_PATH) {
         for (;;) {
             const uint32_t vertex[] = { VKRT_STAGE_VERTEX };
-            uint32_t active = 0;
-            if ((r = run_stages(w, vertex, zero, 1, push, true, false, &active)) != VKRT_OK) return r;
-            if ((r = gpu_wavefront_trace(w->vk, w->shadow, w->scene, n, &w->device_ms)) != VKRT_OK) return r;
-            if (active == 0) break;
-            if ((r = gpu_wavefront_trace(w->vk, w->closest, w->scene, n, &w->device_ms)) != VKRT_OK) return r;
+            if ((r = run_stages(w, vertex, zero, 1, queue_push(push, in, out, lanes), true, false, &c)) != VKRT_OK)
+                return r;
+            if ((r = gpu_wavefront_trace(w->vk, w->shadow, w->scene, lanes, &w->device_ms)) != VKRT_OK) return r;
+            /* Queued paths that ended with a shadow ray are resolved by FINISH: no lane is reused
+             * after this pass. */
+            if (c.active == 0) break;
+            lanes = c.queued;
+            uint32_t swap = in;
+            in = out;
+            out = swap;
+            if ((r = gpu_wavefront_trace(w->vk, w->closest, w->scene, lanes, &w->device_ms)) != VKRT_OK) return r;
         }
         return run_stage(w, VKRT_STAGE_FINISH, push, 0);
     }
     const vkrt_gpu_lighting *l = &p->lighting;
     const uint32_t shadows = p->mode == VKRT_MODE_AO ? l->ao_samples
                                                      : l->punctual_count + (l->emitter_pick > 0.0f ? 1u : 0u);
+    const vkrt_gpu_push queued = queue_push(push, in, out, lanes);
     const uint32_t first_stage[] = { shadows ? VKRT_STAGE_HIT_SHADOW : VKRT_STAGE_HIT };
-    if ((r = run_stages(w, first_stage, zero, 1, push, false, false, NULL)) != VKRT_OK) return r;
+    if ((r = run_stages(w, first_stage, zero, 1, queued, false, false, NULL)) != VKRT_OK) return r;
     for (uint32_t k = 0; k < shadows; k++) {
-        if ((r = gpu_wavefront_trace(w->vk, w->shadow, w->scene, n, &w->device_ms)) != VKRT_OK) return r;
-        r = k + 1 < shadows ? run_stage(w, VKRT_STAGE_SHADOW, push, k + 1) : VKRT_OK;
+        if ((r = gpu_wavefront_trace(w->vk, w->shadow, w->scene, lanes, &w->device_ms)) != VKRT_OK) return r;
+        r = k + 1 < shadows ? run_stage(w, VKRT_STAGE_SHADOW, queued, k + 1) : VKRT_OK;
         if (r != VKRT_OK) return r;
     }
     return run_stage(w, VKRT_STAGE_FINISH, push, 0);

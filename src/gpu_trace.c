@@ -738,6 +738,7 @@ vkrt_result gpu_wavefront_trace(vk_context *vk, gpu_wavefront_tracer *t, const g
 {
     if (count > t->capacity)
         return core_fail(vk->core, VKRT_ERROR_INVALID_ARGUMENT, "%u rays exceed the wavefront's %u", count, t->capacity);
+    if (count == 0) return VKRT_OK;
     vkrt_gpu_push push = { .tile_width = count, .tile_height = 1, .tri_end = scene->tri_count,
                            .tri_total = scene->tri_count, .last_chunk = 1 };
     const pass_desc pass = { .pipe = &t->pipe, .scene = scene, .naive = t->naive, .budget = t->budget, .rays = true,
