@@ -302,6 +302,12 @@ vkrt_result vkrt_scene_create(vkrt_context *ctx, const vkrt_scene_desc *desc, vk
     if (!s->texel_count) memset(s->texels, 0, 2 * sizeof *s->texels);
     scene_pack_surfaces(&m, s->surfaces, s->materials, s->textures, s->texels);
     fill_stats(s, &m, load_ms);
+    s->stats.lights = s->light_count;
+    s->stats.has_metals = s->has_metals;
+    for (uint32_t t = 0; t < m.tri_count; t++) {
+        const vkrt_gpu_material *mat = &s->materials[s->surfaces[t].material];
+        s->stats.emissive_triangles += mat->emissive.x > 0.0f || mat->emissive.y > 0.0f || mat->emissive.z > 0.0f;
+    }
     mesh_destroy(c, &m);
     if (ctx->vk) {
         r = gpu_scene_upload(ctx->vk, s->bvh.nodes, s->bvh.node_count, s->tris, s->bvh.tri_count, &s->gpu);

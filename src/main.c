@@ -745,10 +745,12 @@ static int command_info(options *o)
     printf("bytes         %" PRIu64 " (nodes %" PRIu64 ", triangles %" PRIu64 "; %.1f per triangle)\n",
            s.node_bytes + s.triangle_bytes, s.node_bytes, s.triangle_bytes,
            s.triangles ? (double)(s.node_bytes + s.triangle_bytes) / (double)s.triangles : 0.0);
-    printf("surfaces      %" PRIu64 " bytes (albedo and uv modes only): %u material%s, %u texture%s, %s\n",
+    printf("surfaces      %" PRIu64 " bytes (albedo, uv and the lighting modes): %u material%s, %u texture%s, %s\n",
            s.surface_bytes, s.materials, s.materials == 1 ? "" : "s", s.textures, s.textures == 1 ? "" : "s",
            s.has_texcoords ? "texture coordinates" : "no texture coordinates");
     if (s.alpha_tested) printf("alpha mask    some materials: every hit is alpha tested\n");
+    printf("lights        %u point or directional from the file, %" PRIu64 " emissive triangle%s%s\n", s.lights,
+           s.emissive_triangles, s.emissive_triangles == 1 ? "" : "s", s.has_metals ? "; metallic materials" : "");
     double per_tri = s.triangles ? 1.0 / (double)s.triangles : 0.0;
     printf("memory        host %.1f bytes per triangle; device (GPU backend) %.1f, %.1f more once a mode reads "
            "the surfaces\n",

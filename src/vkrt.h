@@ -252,6 +252,10 @@ typedef struct vkrt_scene_stats {
                                       render needs them (albedo and uv modes) */
     uint64_t host_bytes;           /* what the scene holds in host memory: nodes, triangles,
                                       their BVH order and the surfaces, on either backend */
+    uint32_t lights;               /* the file's point and directional lights (glTF
+                                      KHR_lights_punctual) */
+    uint64_t emissive_triangles;   /* triangles whose material emits: the area lights */
+    bool has_metals;               /* some material is metallic (the lighting modes' GGX code) */
 } vkrt_scene_stats;
 
 vkrt_result vkrt_scene_stats_get(const vkrt_scene *scene, vkrt_scene_stats *out_stats);

@@ -73,6 +73,12 @@ then ok "ao on GPU and CPU: same samples and pixels"; else bad "ao on GPU and CP
 if grep -q "skipped: textures (no material has a texture)" "$tmp/err" && grep -q "skipped: random numbers" "$tmp/err" &&
    grep -q "compiled in: point and directional lights" "$tmp/err"; then ok "--verbose reports what was skipped and why"
 else bad "--verbose reports what was skipped and why"; fi
+"$vkrt" info tests/data/cornell.obj >"$tmp/out" 2>"$tmp/err"
+if grep -q "lights        0 point or directional from the file, 2 emissive triangles" "$tmp/out"; then ok "info counts the Cornell box's emissive triangles"
+else bad "info counts the Cornell box's emissive triangles"; fi
+"$vkrt" info tests/data/lights.gltf >"$tmp/out" 2>"$tmp/err"
+if grep -q "lights        3 point or directional from the file, 0 emissive triangles" "$tmp/out"; then ok "info counts a glTF's punctual lights"
+else bad "info counts a glTF's punctual lights"; fi
 expect "bad --light" 2 "$vkrt" render --mode shaded --light spot:0,1,0:1,1,1 -o "$tmp/x.png" --size 8x8
 expect "negative --light colour" 2 "$vkrt" render --mode shaded --light point:0,1,0:-1,1,1 -o "$tmp/x.png" --size 8x8
 expect "bad --sky" 2 "$vkrt" render --mode path --sky 1,1 -o "$tmp/x.png" --size 8x8
