@@ -187,7 +187,8 @@ void stage_shadow(uint k)
                                 start + u.x * lighting.emitter_pick);
             light_contribution(j, lights[j].pick / lighting.emitter_pick, u.y, u.z, false);
         }
-    } else if (lighting.light_count > 0u) {
+    } else if ((FEATURES & (VKRT_GPU_FEATURE_PUNCTUAL | VKRT_GPU_FEATURE_EMITTERS)) != 0u && lighting.light_count > 0u) {
+        /* Next-event estimation: compiled out of a render lit only by the sky. */
         vec4 u = next4();
         uint j = pick_light(0u, lighting.light_count, u.x);
         light_contribution(j, lights[j].pick, u.y, u.z, true);

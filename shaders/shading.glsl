@@ -243,12 +243,14 @@ light_sample sample_light(vkrt_gpu_light light, vec3 p, vec3 ng, float u0, float
 {
     light_sample o = light_sample(vkrt_gpu_ray(vec3(0.0), 0.0, vec3(0.0), 0.0), vec3(0.0), vec3(0.0), 0.0, false);
     vec3 origin = ray_offset(p, ng);
-    if (light.type == VKRT_GPU_LIGHT_DIRECTIONAL) {
+    /* Each kind of light is compiled in only when the render has one. */
+    const bool punctual = (FEATURES & VKRT_GPU_FEATURE_PUNCTUAL) != 0u;
+    if (punctual && light.type == VKRT_GPU_LIGHT_DIRECTIONAL) {
         o.wi = -light.vector;
         o.radiance = light.color;
         o.ray = vkrt_gpu_ray(origin, 0.0, o.wi, 0.0);
         o.pdf = 0.0;
-    } else if (light.type == VKRT_GPU_LIGHT_POINT) {
+    } else if (punctual && light.type == VKRT_GPU_LIGHT_POINT) {
         precise vec3 d = light.vector - origin;
         float dist2 = dot3(d, d);
         if (!(dist2 > 0.0)) return o;
