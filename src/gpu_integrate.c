@@ -50,8 +50,8 @@ static vkrt_result create_descriptor_set(wave *w)
     if (res != VK_SUCCESS) return vk_fail(vk, res, "vkAllocateDescriptorSets (shade)");
     const gpu_scene *s = w->scene;
     const VkBuffer buffers[VKRT_SHADE_BINDING_COUNT] = {
-        [VKRT_SHADE_BINDING_TRIS] = s->tris.buffer,
-        [VKRT_SHADE_BINDING_SURFACES] = s->surfaces.buffer,
+        [VKRT_SHADE_BINDING_TRIS] = s->tris.pieces[0].buffer,
+        [VKRT_SHADE_BINDING_SURFACES] = s->surfaces.pieces[0].buffer,
         [VKRT_SHADE_BINDING_MATERIALS] = s->materials.buffer,
         [VKRT_SHADE_BINDING_TEXTURES] = s->textures.buffer,
         [VKRT_SHADE_BINDING_TEXELS] = s->texels.buffer,
@@ -64,6 +64,7 @@ static vkrt_result create_descriptor_set(wave *w)
         [VKRT_SHADE_BINDING_SHADOW_HITS] = gpu_wavefront_hits(w->shadow),
         [VKRT_SHADE_BINDING_ACTIVE] = w->counters.buffer,
         [VKRT_SHADE_BINDING_LIGHTING] = w->lighting.buffer,
+        [VKRT_SHADE_BINDING_PIECES] = s->pieces.buffer,
     };
     VkDescriptorBufferInfo infos[VKRT_SHADE_BINDING_COUNT];
     VkWriteDescriptorSet writes[VKRT_SHADE_BINDING_COUNT];
@@ -99,7 +100,8 @@ static vkrt_result wave_create(wave *w, uint32_t slots)
     w->shadow = gpu_wavefront_tracer_alloc(vk);
     if (!w->closest || !w->shadow) return core_fail(vk->core, VKRT_ERROR_OUT_OF_MEMORY, "out of memory for the wavefront");
     vk_trace_pipeline any;
-    vkrt_result r = vk_shade_pipeline_get(vk, (vk_shade_variant){ VKRT_STAGE_CAMERA, p->mode, p->features }, &any);
+    vkrt_result r = vk_shade_pipeline_get(
+        vk, (vk_shade_variant){ VKRT_STAGE_CAMERA, p->mode, p->features, w->scene->split_shift }, &any);
     gpu_trace_rays_params trace = { .traversal = p->traversal, .intersector = p->intersector,
                                     .alpha_tested = p->alpha_tested };
     if (r == VKRT_OK) r = gpu_wavefront_tracer_init(vk, w->closest, w->scene, &trace, slots);
@@ -172,7 +174,8 @@ static vkrt_result batch_begin(wave *w, stage_batch *b, bool count_active, bool 
 static vkrt_result batch_stage(wave *w, stage_batch *b, uint32_t stage, vkrt_gpu_push push, uint32_t arg)
 {
     vk_trace_pipeline pipe;
-    vkrt_result r = vk_shade_pipeline_get(w->vk, (vk_shade_variant){ stage, w->params->mode, w->params->features }, &pipe);
+    vkrt_result r = vk_shade_pipeline_get(
+        w->vk, (vk_shade_variant){ stage, w->params->mode, w->params->features, w->scene->split_shift }, &pipe);
     if (r != VKRT_OK) return r;
     record_full_barrier(b->cmd);
     push.stage_arg = arg;

@@ -1,6 +1,8 @@
 #include "gpu_trace.h"
 
+#include <assert.h>
 #include <math.h>
+#include <stdio.h>
 #include <string.h>
 
 #include "vk_pipeline.h"
@@ -26,25 +28,120 @@ static vkrt_result check_range(vk_context *vk, VkDeviceSize bytes, const char *w
     return VKRT_OK;
 }
 
+/* The most bytes one buffer of the scene's arrays may hold: what a descriptor can bind (the
+ * first piece of each array is bound as an ordinary storage buffer), what one allocation may
+ * be, and the test knob, whichever is least. */
+static VkDeviceSize piece_limit(const vk_context *vk)
+{
+    VkDeviceSize limit = vk->properties.limits.maxStorageBufferRange;
+    if (vk->max_allocation && vk->max_allocation < limit) limit = vk->max_allocation;
+    if (vk->scene_buffer_limit && vk->scene_buffer_limit < limit) limit = vk->scene_buffer_limit;
+    /* Two triangles at least, so a split scene's pieces hold 2^1 elements or more. */
+    return limit < 2 * sizeof(vkrt_gpu_tri) ? 2 * sizeof(vkrt_gpu_tri) : limit;
+}
+
+static void gpu_array_destroy(vk_context *vk, gpu_array *a)
+{
+    for (uint32_t i = 0; i < a->count; i++) vk_buffer_destroy(vk, &a->pieces[i]);
+    core_free(vk->core, a->pieces);
+    a->pieces = NULL;
+    a->count = 0;
+}
+
+/* `count` elements of `elem_size` bytes into one buffer (shift 0), or into pieces of
+ * 2^shift elements each. */
+static vkrt_result gpu_array_upload(vk_context *vk, const void *data, uint64_t count, size_t elem_size, uint32_t shift,
+                                    const char *label, gpu_array *out)
+{
+    const uint64_t per_piece = shift ? (uint64_t)1 << shift : (count ? count : 1);
+    const uint64_t pieces = count ? (count + per_piece - 1) / per_piece : 1;
+    out->pieces = core_calloc_array(vk->core, (size_t)pieces, sizeof *out->pieces);
+    if (!out->pieces)
+        return core_fail(vk->core, VKRT_ERROR_OUT_OF_MEMORY, "out of memory for the %llu buffers of the scene's %s",
+                         (unsigned long long)pieces, label);
+    out->count = (uint32_t)pieces;
+    VkBufferUsageFlags usage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT;
+    if (shift) usage |= VK_BUFFER_USAGE_SHADER_DEVICE_ADDRESS_BIT;
+    vkrt_result r = VKRT_OK;
+    for (uint64_t k = 0; k < pieces && r == VKRT_OK; k++) {
+        const uint64_t first = k * per_piece;
+        const uint64_t n = count - first < per_piece ? count - first : per_piece;
+        char name[64];
+        if (shift) snprintf(name, sizeof name, "vkrt %s (piece %llu)", label, (unsigned long long)k);
+        else snprintf(name, sizeof name, "vkrt %s", label);
+        r = vk_buffer_create(vk, n * elem_size, usage, VK_MEMORY_DEVICE, name, &out->pieces[k]);
+        if (r == VKRT_OK) r = vk_buffer_upload(vk, &out->pieces[k], (const char *)data + first * elem_size, n * elem_size);
+    }
+    return r;
+}
+
+/* Fills the piece table of a split scene with the address of every piece (the surfaces'
+ * entries stay zero until they are uploaded: no pipeline reads them before). */
+static vkrt_result write_piece_table(vk_context *vk, gpu_scene *s)
+{
+    if (!s->split_shift) return VKRT_OK;
+    const size_t entries = (size_t)s->pieces.size / sizeof(vkrt_gpu_address);
+    vkrt_gpu_address *table = core_calloc_array(vk->core, entries, sizeof *table);
+    if (!table) return core_fail(vk->core, VKRT_ERROR_OUT_OF_MEMORY, "out of memory for the scene's piece table");
+    const gpu_array *arrays[VKRT_PIECE_ARRAYS] = {
+        [VKRT_PIECE_TRIS] = &s->tris, [VKRT_PIECE_NODES] = &s->nodes, [VKRT_PIECE_SURFACES] = &s->surfaces };
+    for (uint32_t a = 0; a < VKRT_PIECE_ARRAYS; a++) {
+        if (a == VKRT_PIECE_SURFACES && !s->surfaces_uploaded) continue;
+        for (uint32_t k = 0; k < arrays[a]->count; k++) {
+            VkDeviceAddress address = vk_buffer_address(vk, &arrays[a]->pieces[k]);
+            table[(size_t)VKRT_PIECE_ARRAYS * k + a] = (vkrt_gpu_address){ (uint32_t)address, (uint32_t)(address >> 32) };
+        }
+    }
+    vkrt_result r = vk_buffer_upload(vk, &s->pieces, table, s->pieces.size);
+    core_free(vk->core, table);
+    return r;
+}
+
 vkrt_result gpu_scene_upload(vk_context *vk, const vkrt_gpu_node *nodes, uint32_t node_count,
                              const vkrt_gpu_tri *tris, uint32_t tri_count, gpu_scene *out)
 {
     memset(out, 0, sizeof *out);
-    VkDeviceSize node_bytes = (VkDeviceSize)node_count * sizeof *nodes;
-    VkDeviceSize tri_bytes = (VkDeviceSize)tri_count * sizeof *tris;
-    vkrt_result r;
-    if ((r = check_range(vk, node_bytes, "BVH nodes")) != VKRT_OK) return r;
-    if ((r = check_range(vk, tri_bytes, "triangles")) != VKRT_OK) return r;
+    const VkDeviceSize limit = piece_limit(vk);
+    const VkDeviceSize node_bytes = (VkDeviceSize)node_count * sizeof *nodes;
+    const VkDeviceSize tri_bytes = (VkDeviceSize)tri_count * sizeof *tris;
+    vkrt_result r = VKRT_OK;
+    /* The triangles are the largest array (at most 2T - 1 nodes of 32 bytes are fewer bytes than
+     * T triangles of 64) and set the one shift of every array: a piece holds as many triangles
+     * as fit the limit, rounded down to a power of two. */
+    assert(node_bytes <= tri_bytes);
+    if (tri_bytes > limit) {
+        if (!vk->buffer_address)
+            return core_fail(vk->core, VKRT_ERROR_LIMIT,
+                             "the scene's triangles need %llu bytes, more than one buffer of this device may hold "
+                             "(%llu bytes), and the device lacks bufferDeviceAddress to split them across buffers",
+                             (unsigned long long)tri_bytes, (unsigned long long)limit);
+        uint32_t shift = 1;
+        while (((VkDeviceSize)2 << shift) * sizeof *tris <= limit && shift < 31) shift++;
+        out->split_shift = shift;
+    }
+    if ((r = gpu_array_upload(vk, nodes, node_count, sizeof *nodes, out->split_shift, "BVH nodes", &out->nodes)) != VKRT_OK)
+        goto fail;
+    if ((r = gpu_array_upload(vk, tris, tri_count, sizeof *tris, out->split_shift, "triangles", &out->tris)) != VKRT_OK)
+        goto fail;
     VkBufferUsageFlags usage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT;
-    if ((r = vk_buffer_create(vk, node_bytes, usage, VK_MEMORY_DEVICE, "vkrt BVH nodes", &out->nodes)) != VKRT_OK) goto fail;
-    if ((r = vk_buffer_create(vk, tri_bytes, usage, VK_MEMORY_DEVICE, "vkrt triangles", &out->tris)) != VKRT_OK) goto fail;
-    if ((r = vk_buffer_upload(vk, &out->nodes, nodes, node_bytes)) != VKRT_OK) goto fail;
-    if ((r = vk_buffer_upload(vk, &out->tris, tris, tri_bytes)) != VKRT_OK) goto fail;
+    /* The table has room for the surfaces, whose pieces are as many as the triangles'. */
+    const uint32_t most = out->tris.count > out->nodes.count ? out->tris.count : out->nodes.count;
+    const VkDeviceSize table_bytes =
+        (VkDeviceSize)(out->split_shift ? VKRT_PIECE_ARRAYS * most : 1) * sizeof(vkrt_gpu_address);
+    if ((r = vk_buffer_create(vk, table_bytes, usage, VK_MEMORY_DEVICE, "vkrt piece table", &out->pieces)) != VKRT_OK)
+        goto fail;
+    const vkrt_gpu_address none = { 0, 0 };
+    if (!out->split_shift && (r = vk_buffer_upload(vk, &out->pieces, &none, sizeof none)) != VKRT_OK) goto fail;
+    if ((r = write_piece_table(vk, out)) != VKRT_OK) goto fail;
     /* Every binding needs a buffer; these stand in until a mode reads surfaces. */
-    vk_buffer *placeholders[4] = { &out->surfaces, &out->materials, &out->textures, &out->texels };
-    const VkDeviceSize placeholder_bytes[4] = { sizeof(vkrt_gpu_surface), sizeof(vkrt_gpu_material),
-                                                sizeof(vkrt_gpu_texture), 2 * sizeof(uint32_t) };
-    for (int i = 0; i < 4; i++)
+    const vkrt_gpu_surface no_surface = { 0 };
+    if ((r = gpu_array_upload(vk, &no_surface, 1, sizeof no_surface, 0, "surfaces (placeholder)", &out->surfaces)) !=
+        VKRT_OK)
+        goto fail;
+    vk_buffer *placeholders[3] = { &out->materials, &out->textures, &out->texels };
+    const VkDeviceSize placeholder_bytes[3] = { sizeof(vkrt_gpu_material), sizeof(vkrt_gpu_texture),
+                                                2 * sizeof(uint32_t) };
+    for (int i = 0; i < 3; i++)
         if ((r = vk_buffer_create(vk, placeholder_bytes[i], usage, VK_MEMORY_DEVICE, "vkrt surfaces (placeholder)",
                                   placeholders[i])) != VKRT_OK)
             goto fail;
@@ -58,12 +155,23 @@ fail:
 
 void gpu_scene_destroy(vk_context *vk, gpu_scene *s)
 {
-    vk_buffer_destroy(vk, &s->nodes);
-    vk_buffer_destroy(vk, &s->tris);
-    vk_buffer_destroy(vk, &s->surfaces);
+    gpu_array_destroy(vk, &s->nodes);
+    gpu_array_destroy(vk, &s->tris);
+    gpu_array_destroy(vk, &s->surfaces);
     vk_buffer_destroy(vk, &s->materials);
     vk_buffer_destroy(vk, &s->textures);
     vk_buffer_destroy(vk, &s->texels);
+    vk_buffer_destroy(vk, &s->pieces);
+}
+
+void gpu_scene_usage(const gpu_scene *s, uint64_t *out_bytes, uint32_t *out_buffers)
+{
+    uint64_t bytes = s->materials.allocated + s->textures.allocated + s->texels.allocated + s->pieces.allocated;
+    const gpu_array *arrays[3] = { &s->nodes, &s->tris, &s->surfaces };
+    for (int a = 0; a < 3; a++)
+        for (uint32_t k = 0; k < arrays[a]->count; k++) bytes += arrays[a]->pieces[k].allocated;
+    *out_bytes = bytes;
+    *out_buffers = s->nodes.count + s->tris.count;
 }
 
 vkrt_result gpu_scene_upload_surfaces(vk_context *vk, gpu_scene *s, const gpu_surface_data *d)
@@ -76,14 +184,18 @@ vkrt_result gpu_scene_upload_surfaces(vk_context *vk, gpu_scene *s, const gpu_su
         const char *name;
         vk_buffer fresh;
     } parts[] = {
-        { &s->surfaces, d->surfaces, (VkDeviceSize)s->tri_count * sizeof *d->surfaces, "surfaces", { 0 } },
         { &s->materials, d->materials, (VkDeviceSize)d->material_count * sizeof *d->materials, "materials", { 0 } },
         { &s->textures, d->textures, (VkDeviceSize)d->texture_count * sizeof *d->textures, "textures", { 0 } },
         { &s->texels, d->texels, (VkDeviceSize)d->texel_count * 2 * sizeof *d->texels, "texels", { 0 } },
     };
     enum { PARTS = sizeof parts / sizeof parts[0] };
     VkBufferUsageFlags usage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT;
+    /* The surfaces, one per triangle, split as the triangles are (and so within the limit). */
+    gpu_array surfaces = { 0 };
     vkrt_result r = VKRT_OK;
+    if (!s->split_shift) r = check_range(vk, (VkDeviceSize)s->tri_count * sizeof *d->surfaces, "surfaces");
+    if (r == VKRT_OK)
+        r = gpu_array_upload(vk, d->surfaces, s->tri_count, sizeof *d->surfaces, s->split_shift, "surfaces", &surfaces);
     for (int i = 0; i < PARTS && r == VKRT_OK; i++) {
         r = check_range(vk, parts[i].bytes, parts[i].name);
         if (r == VKRT_OK) r = vk_buffer_create(vk, parts[i].bytes, usage, VK_MEMORY_DEVICE, parts[i].name, &parts[i].fresh);
@@ -94,7 +206,13 @@ vkrt_result gpu_scene_upload_surfaces(vk_context *vk, gpu_scene *s, const gpu_su
         vk_buffer_destroy(vk, keep);
         if (r == VKRT_OK) *parts[i].target = parts[i].fresh;
     }
-    s->surfaces_uploaded = r == VKRT_OK;
+    gpu_array_destroy(vk, r == VKRT_OK ? &s->surfaces : &surfaces);
+    if (r != VKRT_OK) return r;
+    s->surfaces = surfaces;
+    s->surfaces_uploaded = true;
+    /* Without their table entries a split scene's surfaces cannot be read: the next render
+     * that needs them uploads them again (replacing these). */
+    if ((r = write_piece_table(vk, s)) != VKRT_OK) s->surfaces_uploaded = false;
     return r;
 }
 
@@ -210,12 +328,13 @@ static vkrt_result create_descriptors(vk_context *vk, const gpu_scene *scene, Vk
         uint32_t binding;
         VkBuffer buffer;
     } buffers[] = {
-        { VKRT_BINDING_NODES, scene->nodes.buffer },   { VKRT_BINDING_TRIS, scene->tris.buffer },
+        { VKRT_BINDING_NODES, scene->nodes.pieces[0].buffer },   { VKRT_BINDING_TRIS, scene->tris.pieces[0].buffer },
         { VKRT_BINDING_HITS, o->hits.buffer },         { VKRT_BINDING_RAYS, o->rays.buffer },
         { VKRT_BINDING_RESUME, o->resume.buffer },     { VKRT_BINDING_RESUME_STACK, o->resume_stack.buffer },
         { VKRT_BINDING_UNFINISHED, o->unfinished.buffer },    { VKRT_BINDING_COUNTERS, o->counters.buffer },
-        { VKRT_BINDING_SURFACES, scene->surfaces.buffer },    { VKRT_BINDING_MATERIALS, scene->materials.buffer },
+        { VKRT_BINDING_SURFACES, scene->surfaces.pieces[0].buffer }, { VKRT_BINDING_MATERIALS, scene->materials.buffer },
         { VKRT_BINDING_TEXTURES, scene->textures.buffer },    { VKRT_BINDING_TEXELS, scene->texels.buffer },
+        { VKRT_BINDING_PIECES, scene->pieces.buffer },
     };
     enum { BUFFERS = sizeof buffers / sizeof buffers[0] };
     _Static_assert(BUFFERS == VKRT_BINDING_COUNT - 1, "every binding but the image has a buffer here");
@@ -554,6 +673,7 @@ vkrt_result gpu_trace_render(vk_context *vk, const gpu_scene *scene, const gpu_t
         /* Naive traversal's counts are known without tracing: no variant for them. */
         .counters = params->counters && !naive,
         .alpha = params->alpha_tested,
+        .split = scene->split_shift,
     };
     /* Only heatmap reads the heat kind: other modes share one pipeline whatever it is. */
     if (variant.mode != VKRT_GPU_MODE_HEATMAP) variant.heat = VKRT_GPU_HEAT_NODES;
@@ -650,6 +770,7 @@ vkrt_result gpu_trace_rays(vk_context *vk, const gpu_scene *scene, const gpu_tra
         .budget = naive ? 0 : vk->trace_budget,
         .alpha = params->alpha_tested,
         .anyhit = params->any_hit,
+        .split = scene->split_shift,
     };
     vk_trace_pipeline pipe;
     vkrt_result r = vk_trace_pipeline_get(vk, variant, &pipe);
@@ -710,6 +831,7 @@ vkrt_result gpu_wavefront_tracer_init(vk_context *vk, gpu_wavefront_tracer *t, c
         .budget = naive ? 0 : vk->trace_budget,
         .alpha = params->alpha_tested,
         .anyhit = params->any_hit,
+        .split = scene->split_shift,
     };
     vkrt_result r = vk_trace_pipeline_get(vk, variant, &t->pipe);
     t->naive = naive;

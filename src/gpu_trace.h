@@ -8,24 +8,42 @@
 #include "trace_counts.h"
 #include "vk_buffer.h"
 
+/* One of a scene's large arrays on the device (nodes, triangles, surfaces): one storage buffer,
+ * or, in a split scene, pieces of 2^split_shift elements each (the last one shorter), every
+ * piece a buffer of its own that the shaders reach by its address in the piece table. */
+typedef struct gpu_array {
+    vk_buffer *pieces;         /* count of them (core allocator) */
+    uint32_t count;
+} gpu_array;
+
 typedef struct gpu_scene {
-    vk_buffer nodes;
-    vk_buffer tris;
-    vk_buffer surfaces;        /* vkrt_gpu_surface per triangle, */
+    gpu_array nodes;
+    gpu_array tris;
+    gpu_array surfaces;        /* vkrt_gpu_surface per triangle, */
     vk_buffer materials;       /* the material table, */
     vk_buffer textures;        /* the texture table and */
     vk_buffer texels;          /* the texels: one-element placeholders until a render needs
                                   them (gpu_scene_upload_surfaces) */
+    vk_buffer pieces;          /* the piece table (VKRT_PIECE_ARRAYS vkrt_gpu_address per piece);
+                                  one zero entry when the scene is not split */
+    uint32_t split_shift;      /* 0: one buffer per array; else log2 of the elements per piece
+                                  (VKRT_SPEC_SPLIT of every pipeline that traces the scene) */
     bool surfaces_uploaded;
     uint32_t node_count;
     uint32_t tri_count;
 } gpu_scene;
 
-/* Fails with VKRT_ERROR_LIMIT (naming the buffer and the device limit) when an array exceeds
- * the device's maxStorageBufferRange. */
+/* Uploads the BVH nodes and the triangles. Where the triangles exceed what one buffer may
+ * hold (the device's maxStorageBufferRange and maxMemoryAllocationSize, or the smaller
+ * vk->scene_buffer_limit), every array of the scene is split into pieces; on a device without
+ * bufferDeviceAddress that fails with VKRT_ERROR_LIMIT, naming the array and the limit. */
 vkrt_result gpu_scene_upload(vk_context *vk, const vkrt_gpu_node *nodes, uint32_t node_count,
                              const vkrt_gpu_tri *tris, uint32_t tri_count, gpu_scene *out);
 void gpu_scene_destroy(vk_context *vk, gpu_scene *s);
+
+/* What the scene holds on the device: the bytes of its memory allocations, and the storage
+ * buffers of its nodes and triangles (2 unless it is split). */
+void gpu_scene_usage(const gpu_scene *s, uint64_t *out_bytes, uint32_t *out_buffers);
 
 /* What gpu_scene_upload_surfaces uploads (counts of at least 1). */
 typedef struct gpu_surface_data {

@@ -49,8 +49,14 @@ vkrt_result vk_buffer_create(vk_context *vk, VkDeviceSize size, VkBufferUsageFla
     VkMemoryPropertyFlags flags = vk->memory.memoryTypes[type].propertyFlags;
     /* A small scene on a large device may keep host-visible memory that is not device-local,
      * so staging is decided by what the chosen type offers, not by what was asked for. */
+    /* A buffer the shaders reach by address needs memory that has one. */
+    VkMemoryAllocateFlagsInfo address_flags = {
+        .sType = VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_FLAGS_INFO,
+        .flags = VK_MEMORY_ALLOCATE_DEVICE_ADDRESS_BIT,
+    };
     VkMemoryAllocateInfo alloc = {
         .sType = VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO,
+        .pNext = (usage & VK_BUFFER_USAGE_SHADER_DEVICE_ADDRESS_BIT) ? &address_flags : NULL,
         .allocationSize = req.size,
         .memoryTypeIndex = (uint32_t)type,
     };
@@ -62,6 +68,7 @@ vkrt_result vk_buffer_create(vk_context *vk, VkDeviceSize size, VkBufferUsageFla
                   label, vk_result_string(res));
         return r;
     }
+    out->allocated = req.size;
     res = vkBindBufferMemory(vk->device, out->buffer, out->memory, 0);
     if (res != VK_SUCCESS) {
         vk_buffer_destroy(vk, out);
@@ -76,6 +83,12 @@ vkrt_result vk_buffer_create(vk_context *vk, VkDeviceSize size, VkBufferUsageFla
         out->coherent = flags & VK_MEMORY_PROPERTY_HOST_COHERENT_BIT;
     }
     return VKRT_OK;
+}
+
+VkDeviceAddress vk_buffer_address(vk_context *vk, const vk_buffer *b)
+{
+    VkBufferDeviceAddressInfo info = { .sType = VK_STRUCTURE_TYPE_BUFFER_DEVICE_ADDRESS_INFO, .buffer = b->buffer };
+    return vkGetBufferDeviceAddress(vk->device, &info);
 }
 
 void vk_buffer_destroy(vk_context *vk, vk_buffer *b)

@@ -8,6 +8,7 @@ typedef struct vk_buffer {
     VkBuffer buffer;
     VkDeviceMemory memory;
     VkDeviceSize size;
+    VkDeviceSize allocated;  /* bytes of its device memory allocation (size rounded up by the driver) */
     void *mapped;        /* persistently mapped when the memory is host-visible, else NULL */
     bool coherent;
 } vk_buffer;
@@ -21,6 +22,9 @@ typedef enum vk_memory_use {
 vkrt_result vk_buffer_create(vk_context *vk, VkDeviceSize size, VkBufferUsageFlags usage, vk_memory_use use,
                              const char *label, vk_buffer *out);
 void vk_buffer_destroy(vk_context *vk, vk_buffer *b);
+/* The device address of a buffer created with VK_BUFFER_USAGE_SHADER_DEVICE_ADDRESS_BIT (which
+ * needs vk->buffer_address). */
+VkDeviceAddress vk_buffer_address(vk_context *vk, const vk_buffer *b);
 
 /* Fills a device buffer: a memcpy when it is mapped, else through a staging buffer. */
 vkrt_result vk_buffer_upload(vk_context *vk, vk_buffer *dst, const void *data, VkDeviceSize size);

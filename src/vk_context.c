@@ -260,9 +260,13 @@ static vkrt_result create_device(vk_context *vk)
     vk->timestamp_period_ns = vk->properties.limits.timestampPeriod;
     /* lavapipe ends loops silently after 65,535 iterations per SIMD group; real GPUs have no
      * such limit, and their pipelines keep no budget code. */
-    VkPhysicalDeviceDriverProperties driver = { .sType = VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_DRIVER_PROPERTIES };
+    VkPhysicalDeviceMaintenance3Properties maintenance3 = {
+        .sType = VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_MAINTENANCE_3_PROPERTIES };
+    VkPhysicalDeviceDriverProperties driver = { .sType = VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_DRIVER_PROPERTIES,
+                                                .pNext = &maintenance3 };
     VkPhysicalDeviceProperties2 props2 = { .sType = VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_PROPERTIES_2, .pNext = &driver };
     vkGetPhysicalDeviceProperties2(vk->physical, &props2);
+    vk->max_allocation = maintenance3.maxMemoryAllocationSize;
     bool llvmpipe = driver.driverID == VK_DRIVER_ID_MESA_LLVMPIPE ||
                     vk->properties.deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU;
     vk->trace_budget = llvmpipe ? VKRT_LAVAPIPE_BUDGET : 0;
@@ -272,6 +276,15 @@ static vkrt_result create_device(vk_context *vk)
     vkGetPhysicalDeviceFeatures(vk->physical, &supported);
     vk->float64 = supported.shaderFloat64 == VK_TRUE;
     VkPhysicalDeviceFeatures enabled = { .shaderFloat64 = supported.shaderFloat64 };
+    /* Buffer device addresses let a scene larger than maxStorageBufferRange be split into
+     * pieces (lavapipe has them but not the non-uniform descriptor indexing an array of buffers
+     * would need); scenes that fit one buffer never use them. */
+    VkPhysicalDeviceVulkan12Features supported12 = { .sType = VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_VULKAN_1_2_FEATURES };
+    VkPhysicalDeviceFeatures2 features2 = { .sType = VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_FEATURES_2, .pNext = &supported12 };
+    vkGetPhysicalDeviceFeatures2(vk->physical, &features2);
+    vk->buffer_address = supported12.bufferDeviceAddress == VK_TRUE;
+    VkPhysicalDeviceVulkan12Features enabled12 = { .sType = VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_VULKAN_1_2_FEATURES,
+                                                   .bufferDeviceAddress = supported12.bufferDeviceAddress };
 
     float priority = 1.0f;
     VkDeviceQueueCreateInfo queue = {
@@ -282,6 +295,7 @@ static vkrt_result create_device(vk_context *vk)
     };
     VkDeviceCreateInfo info = {
         .sType = VK_STRUCTURE_TYPE_DEVICE_CREATE_INFO,
+        .pNext = &enabled12,
         .queueCreateInfoCount = 1,
         .pQueueCreateInfos = &queue,
         .pEnabledFeatures = &enabled,

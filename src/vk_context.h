@@ -25,12 +25,19 @@ typedef struct vk_context {
     bool timestamps;                  /* the queue supports timestamp queries */
     double timestamp_period_ns;
     bool float64;                     /* shaderFloat64 enabled: the shader refines hit distances in double */
+    bool buffer_address;              /* bufferDeviceAddress enabled: a scene beyond one storage buffer
+                                         is split into pieces the shaders reach by address */
+    VkDeviceSize max_allocation;      /* maxMemoryAllocationSize: one device memory allocation at most */
     uint32_t trace_budget;            /* BVH loop iterations per dispatch (VKRT_SPEC_BUDGET); 0: unlimited */
     VkCommandPool command_pool;
     VkPipelineCache pipeline_cache;
     char *pipeline_cache_path;        /* NULL: in memory only */
     uint32_t validation_messages;     /* validation warnings and errors received */
     struct vk_pipelines *pipelines;   /* compiled lazily, owned (vk_pipeline.c) */
+    /* Test knobs: zero from vk_context_create, set by tests through this private header only. */
+    VkDeviceSize scene_buffer_limit;  /* 0: the device's limits; else the most bytes one buffer of a
+                                         scene's arrays may hold, so small scenes split into pieces
+                                         (at least 128: two triangles) */
 } vk_context;
 
 /* Creates everything for the device the desc chooses. Failures: VKRT_ERROR_NO_DEVICE (no
