@@ -319,6 +319,8 @@ vkrt_result vkrt_scene_stats_get(const vkrt_scene *scene, vkrt_scene_stats *out_
 {
     if (!scene || !out_stats) return VKRT_ERROR_INVALID_ARGUMENT;
     *out_stats = scene->stats;
+    /* Read now: the surfaces may have reached the device since the scene was made. */
+    if (scene->ctx->vk) gpu_scene_usage(&scene->gpu, &out_stats->device_bytes, &out_stats->device_buffers);
     return VKRT_OK;
 }
 

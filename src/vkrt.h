@@ -252,6 +252,14 @@ typedef struct vkrt_scene_stats {
                                       render needs them (albedo and uv modes) */
     uint64_t host_bytes;           /* what the scene holds in host memory: nodes, triangles,
                                       their BVH order and the surfaces, on either backend */
+    uint64_t device_bytes;         /* GPU backend: the device memory the scene holds now, as
+                                      allocated (nodes, triangles, the piece table of a split
+                                      scene, and the surfaces once a render has uploaded them);
+                                      0 on the CPU backend */
+    uint32_t device_buffers;       /* GPU backend: storage buffers holding the nodes and the
+                                      triangles: 2, or more where the triangles exceed what one
+                                      buffer of the device may hold (maxStorageBufferRange) and
+                                      the scene is split across buffers; 0 on the CPU backend */
 } vkrt_scene_stats;
 
 vkrt_result vkrt_scene_stats_get(const vkrt_scene *scene, vkrt_scene_stats *out_stats);
