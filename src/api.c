@@ -487,6 +487,8 @@ static vkrt_result render_lighting(vkrt_context *ctx, vkrt_scene *scene, const v
         out_stats->samples = counts.samples;
         out_stats->shadow_rays = counts.shadow_rays;
         out_stats->bounce_rays = counts.bounce_rays;
+        out_stats->submissions = counts.submissions;
+        out_stats->longest_submission_ms = counts.longest_submission_ms;
     }
     light_table_destroy(c, &table);
     return r;
@@ -568,6 +570,8 @@ vkrt_result vkrt_render(vkrt_context *ctx, vkrt_scene *scene, const vkrt_render_
         out_stats->leaves_visited = counts.leaves;
         out_stats->tris_tested = counts.tris;
         out_stats->naive_by_cost = naive_by_cost;
+        out_stats->submissions = counts.submissions;
+        out_stats->longest_submission_ms = counts.longest_submission_ms;
     }
     return r;
 }

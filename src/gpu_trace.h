@@ -1,10 +1,12 @@
-/* Drives shaders/trace.comp: scene buffers on the device, a render as a sequence of tile
- * dispatches and arbitrary rays as a sequence of ray chunks (each its own submission, so
- * progress and cancellation happen between them). */
+/* Drives shaders/trace.comp: scene buffers on the device, a render as a sequence of
+ * rectangles of its tiles and arbitrary rays as a sequence of ray chunks, each its own
+ * submission sized by a pacer to about GPU_SUBMIT_TARGET_MS (progress and cancellation happen
+ * between them). */
 #ifndef VKRT_GPU_TRACE_H
 #define VKRT_GPU_TRACE_H
 
 #include "../shaders/vkrt_shared.h"
+#include "gpu_pace.h"
 #include "trace_counts.h"
 #include "vk_buffer.h"
 
@@ -107,10 +109,23 @@ vkrt_result gpu_wavefront_tracer_init(vk_context *vk, gpu_wavefront_tracer *t, c
                                       const gpu_trace_rays_params *params, uint32_t capacity);
 VkBuffer gpu_wavefront_rays(const gpu_wavefront_tracer *t);
 VkBuffer gpu_wavefront_hits(const gpu_wavefront_tracer *t);
-/* Traces the first `count` rays: one submission, and resume submissions while the loop budget
- * leaves any unfinished. Adds the device time to *device_ms. */
+/* A pacer for a wavefront of up to `capacity` rays (gpu_pace.h): its units are rays times
+ * naive-traversal chunks, and it grows only after the stages and the traversals have all been
+ * fast. */
+void gpu_wavefront_pacer(const vk_context *vk, const gpu_scene *scene, bool naive, uint32_t capacity, gpu_pacer *out);
+
+/* Progress and cancellation between a wavefront traversal's submissions. */
+typedef struct gpu_wave_progress {
+    vkrt_progress_fn progress;  /* may be NULL */
+    void *user;
+    float fraction;
+} gpu_wave_progress;
+
+/* Traces the first `count` rays: one submission, and more while the loop budget leaves any
+ * unfinished or naive traversal has triangle chunks left (as many per submission as the pacer
+ * allows); the pacer learns every submission's time. Adds the device time to *device_ms. */
 vkrt_result gpu_wavefront_trace(vk_context *vk, gpu_wavefront_tracer *t, const gpu_scene *scene, uint32_t count,
-                                double *device_ms);
+                                gpu_pacer *pacer, const gpu_wave_progress *progress, double *device_ms);
 void gpu_wavefront_tracer_destroy(vk_context *vk, gpu_wavefront_tracer *t); /* NULL: no-op */
 
 #endif

@@ -700,6 +700,9 @@ static int command_render(options *o)
             fprintf(stderr, "vkrt: %.2f samples per pixel, %" PRIu64 " shadow rays, %" PRIu64 " bounce rays, %u lights\n",
                     (double)stats.samples / ((double)w * h), stats.shadow_rays, stats.bounce_rays, stats.lights);
         if (verbosity >= 2) report_skips(scene, &o->render, &stats);
+        if (verbosity >= 2 && stats.submissions)
+            fprintf(stderr, "vkrt: %u device submissions, the longest %.1f ms (each is sized to about 100 ms)\n",
+                    stats.submissions, stats.longest_submission_ms);
         if (o->render.traversal_counters) {
             double rays = (double)stats.rays;
             fprintf(stderr, "vkrt: per ray: %.2f boxes entered, %.2f leaves entered, %.2f triangle tests\n",

@@ -38,6 +38,8 @@ typedef struct vk_context {
     VkDeviceSize scene_buffer_limit;  /* 0: the device's limits; else the most bytes one buffer of a
                                          scene's arrays may hold, so small scenes split into pieces
                                          (at least 128: two triangles) */
+    double submit_target_ms;          /* 0: GPU_SUBMIT_TARGET_MS; else the time each submission aims
+                                         at (tiny: every submission as small as it can be) */
 } vk_context;
 
 /* Creates everything for the device the desc chooses. Failures: VKRT_ERROR_NO_DEVICE (no

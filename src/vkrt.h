@@ -396,7 +396,8 @@ typedef struct vkrt_render_desc {
                                  specialisation changes nothing) */
     float *out_error;         /* NULL (default), or width * height floats (borrowed): each pixel's
                                  estimated standard error of its mean luminance (lighting modes) */
-    vkrt_progress_fn progress;/* NULL (default): none; called between tiles */
+    vkrt_progress_fn progress;/* NULL (default): none; GPU: called between every two device
+                                 submissions (each sized to about 100 ms); CPU: between tiles */
     void *progress_user;
 } vkrt_render_desc;
 
@@ -421,6 +422,11 @@ typedef struct vkrt_render_stats {
     uint64_t bounce_rays;     /* extension rays traced after the primary ones (closest-hit) */
     bool naive_by_cost;       /* the default traversal chose naive: the scene's SAH cost (C_trav =
                                  C_isect = 1) was not below its triangle count */
+    uint32_t submissions;     /* GPU: device submissions the render took; each is sized to take
+                                 about 100 ms (progress and cancellation come between them) */
+    double longest_submission_ms; /* GPU: wall-clock time of the longest of them, from submission to
+                                 its fence (the first use of a pipeline includes its compilation
+                                 on drivers that compile at first dispatch, such as lavapipe) */
 } vkrt_render_stats;
 
 /* Floats vkrt_render() writes for an image of width x height: 4 per pixel (RGBA), rows top
@@ -461,7 +467,8 @@ typedef struct vkrt_trace_desc {
                                      visited */
     vkrt_intersector intersector; /* default: watertight */
     vkrt_precision precision;     /* default: float; double needs the CPU backend */
-    vkrt_progress_fn progress;    /* NULL (default): none */
+    vkrt_progress_fn progress;    /* NULL (default): none; called between submissions (GPU) or
+                                     blocks of rays (CPU) */
     void *progress_user;
 } vkrt_trace_desc;
 

@@ -1,7 +1,9 @@
 /* vkrt at scale on the device (lavapipe in CI), validation layer on: scenes split across
  * storage buffers render exactly as the same scenes in one buffer each, and a procedurally
  * generated scene of ten million triangles (beyond lavapipe's 128 MiB maxStorageBufferRange)
- * matches the CPU reference. Any validation message fails the test. */
+ * matches the CPU reference; submissions stay near their target time, the smallest ones give
+ * the same images, and the progress callback cancels promptly, leaving nothing behind. Any
+ * validation message fails the test. */
 #include <stdlib.h>
 #include <string.h>
 
@@ -21,6 +23,46 @@ static void on_log(void *user, vkrt_log_level level, const char *message)
         fprintf(stderr, "  [vkrt %s] %s\n", level == VKRT_LOG_ERROR ? "error" : "warning", message);
         if (strstr(message, "validation")) log_errors++;
     }
+}
+
+/* Host memory of a context made for a leak check: blocks live. */
+static long live_blocks;
+
+static void *counting_alloc(void *user, size_t size)
+{
+    (void)user;
+    void *p = malloc(size);
+    if (p) live_blocks++;
+    return p;
+}
+
+static void counting_free(void *user, void *p)
+{
+    (void)user;
+    live_blocks--;
+    free(p);
+}
+
+/* A second GPU context (validation on, the shared pipeline cache) whose host memory is
+ * counted; NULL on failure. Its validation messages reach on_log, so Vulkan objects left
+ * behind count when it is destroyed (the layer names each one then). */
+static vkrt_context *counted_context(void)
+{
+    vkrt_context_desc desc = { .backend = VKRT_BACKEND_GPU, .log = on_log, .validation = true,
+                               .allocator = { .alloc = counting_alloc, .free = counting_free } };
+    desc.pipeline_cache_path = getenv("VKRT_PIPELINE_CACHE");
+    vkrt_context *ctx = NULL;
+    vkrt_result r = vkrt_context_create(&desc, &ctx);
+    CHECK_MSG(r == VKRT_OK, "counted context: %s", vkrt_result_string(r));
+    return ctx;
+}
+
+static vkrt_scene *make_scene(vkrt_context *ctx, const char *path)
+{
+    vkrt_scene *s = NULL;
+    vkrt_result r = vkrt_scene_create(ctx, &(vkrt_scene_desc){ .path = path }, &s);
+    CHECK_MSG(r == VKRT_OK, "%s: %s", path ? path : "built-in", vkrt_context_last_error(ctx));
+    return s;
 }
 
 /* Creates a scene of `path` on the GPU with every array split into buffers of at most `limit`
@@ -285,6 +327,173 @@ static void ten_million_triangles_match_the_cpu_reference(void)
     vkrt_scene_destroy(s);
 }
 
+/* ---- bounded submissions ---- */
+
+static float *render_stats(vkrt_context *ctx, vkrt_scene *s, const vkrt_render_desc *d, vkrt_render_stats *st)
+{
+    size_t n = vkrt_render_floats(d->width, d->height);
+    float *rgba = malloc(n * sizeof *rgba);
+    vkrt_result r = rgba ? vkrt_render(ctx, s, d, rgba, n, st) : VKRT_ERROR_OUT_OF_MEMORY;
+    CHECK_MSG(r == VKRT_OK, "render (mode %d): %s", (int)d->mode, vkrt_context_last_error(ctx));
+    if (r != VKRT_OK) {
+        free(rgba);
+        return NULL;
+    }
+    return rgba;
+}
+
+/* With a target of a nanosecond every submission shrinks to one 8x8 workgroup (and naive
+ * traversal to one chunk of triangles per submission): primary modes with both traversals
+ * (the dragon's 47,794 triangles are six naive chunks), a lighting mode and vkrt_trace_rays
+ * give the images and hits of the normal pacing, bit for bit, in many more submissions. */
+static void smallest_submissions_give_identical_results(void)
+{
+    vkrt_scene *dragon = make_scene(gpu, VKRT_MODELS_DIR "/meshes/dragon_48k.obj"), *builtin = make_scene(gpu, NULL);
+    if (!dragon || !builtin) goto done;
+    const struct {
+        vkrt_scene *scene;
+        vkrt_render_desc d;
+    } cases[] = {
+        { dragon, { .width = 72, .height = 40, .mode = VKRT_MODE_ID } },
+        { dragon, { .width = 72, .height = 40, .mode = VKRT_MODE_DEPTH, .traversal = VKRT_TRAVERSAL_NAIVE } },
+        { dragon, { .width = 40, .height = 40, .mode = VKRT_MODE_HEATMAP, .heat = VKRT_HEAT_TRIS,
+                    .traversal_counters = true } },
+        { builtin, { .width = 40, .height = 24, .mode = VKRT_MODE_PATH, .spp = 3, .seed = 7 } },
+        { builtin, { .width = 40, .height = 24, .mode = VKRT_MODE_AO, .spp = 2, .traversal = VKRT_TRAVERSAL_NAIVE } },
+    };
+    for (size_t k = 0; k < sizeof cases / sizeof cases[0]; k++) {
+        vkrt_render_stats normal_stats, tiny_stats;
+        float *normal = render_stats(gpu, cases[k].scene, &cases[k].d, &normal_stats);
+        gpu->vk->submit_target_ms = 1e-6;
+        float *tiny = render_stats(gpu, cases[k].scene, &cases[k].d, &tiny_stats);
+        gpu->vk->submit_target_ms = 0.0;
+        size_t n = vkrt_render_floats(cases[k].d.width, cases[k].d.height), differ = 0;
+        for (size_t i = 0; normal && tiny && i < n; i++) differ += memcmp(&normal[i], &tiny[i], sizeof *tiny) != 0;
+        fprintf(stderr, "  case %zu: %u submissions (longest %.1f ms); smallest: %u\n", k, normal_stats.submissions,
+                normal_stats.longest_submission_ms, tiny_stats.submissions);
+        CHECK_MSG(normal && tiny && differ == 0, "case %zu: %zu of %zu floats differ with the smallest submissions", k,
+                  differ, n);
+        const uint64_t groups = (uint64_t)((cases[k].d.width + 7) / 8) * ((cases[k].d.height + 7) / 8);
+        CHECK_MSG(tiny_stats.submissions >= groups && tiny_stats.submissions > 4 * normal_stats.submissions,
+                  "case %zu: %u submissions at the smallest, %u normally, %" PRIu64 " workgroups", k,
+                  tiny_stats.submissions, normal_stats.submissions, groups);
+        CHECK_EQ_U64(tiny_stats.nodes_visited, normal_stats.nodes_visited);
+        CHECK_EQ_U64(tiny_stats.samples, normal_stats.samples);
+        free(normal);
+        free(tiny);
+    }
+    enum { RAYS = 3000 };
+    vkrt_ray *rays = malloc(RAYS * sizeof *rays);
+    vkrt_hit *ha = malloc(RAYS * sizeof *ha), *hb = malloc(RAYS * sizeof *hb);
+    for (int i = 0; i < RAYS; i++) {
+        float a = 6.2831853f * (float)i / RAYS * 17.0f;
+        rays[i] = (vkrt_ray){ .origin = { 0.1f * cosf(a), 0.1f * sinf(a), 2.0f }, .dir = { 0.3f * sinf(3 * a), 0.2f * cosf(a), -1.0f } };
+    }
+    for (vkrt_traversal t = VKRT_TRAVERSAL_BVH; t <= VKRT_TRAVERSAL_NAIVE; t++) {
+        vkrt_trace_desc td = { .traversal = t };
+        CHECK(vkrt_trace_rays(gpu, dragon, &td, rays, RAYS, ha) == VKRT_OK);
+        gpu->vk->submit_target_ms = 1e-6;
+        CHECK(vkrt_trace_rays(gpu, dragon, &td, rays, RAYS, hb) == VKRT_OK);
+        gpu->vk->submit_target_ms = 0.0;
+        CHECK_MSG(memcmp(ha, hb, RAYS * sizeof *ha) == 0, "trace_rays (traversal %d) differ with the smallest submissions",
+                  (int)t);
+    }
+    free(rays);
+    free(ha);
+    free(hb);
+done:
+    vkrt_scene_destroy(dragon);
+    vkrt_scene_destroy(builtin);
+}
+
+/* Progress callbacks of a render that cancels at the `cancel_at`-th: when each came, and when
+ * the cancelling one returned. */
+typedef struct progress_log {
+    uint32_t calls, cancel_at;
+    double last_ms, longest_gap_ms, cancelled_ms;
+} progress_log;
+
+static bool log_progress(void *user, const char *stage, float fraction)
+{
+    (void)stage;
+    (void)fraction;
+    progress_log *p = user;
+    double now = core_now_ms();
+    /* The first gap holds the pipeline's compilation on lavapipe, not a submission. */
+    if (p->calls >= 2 && now - p->last_ms > p->longest_gap_ms) p->longest_gap_ms = now - p->last_ms;
+    p->last_ms = now;
+    if (++p->calls < p->cancel_at) return true;
+    p->cancelled_ms = core_now_ms();
+    return false;
+}
+
+/* Long renders (naive traversal over the 200k dragon: 25 triangle chunks per pixel; BVH path
+ * tracing; many rays) cancelled from their progress callback: the callback is called at least
+ * every few submissions' time, the call returns VKRT_ERROR_CANCELLED within a moment of the
+ * callback saying so, and the context and scene are left usable and leak nothing. */
+static void progress_cancels_within_one_submission(void)
+{
+    vkrt_context *ctx = counted_context();
+    vkrt_scene *s = ctx ? make_scene(ctx, VKRT_MODELS_DIR "/meshes/dragon_200k.obj") : NULL;
+    if (!s) {
+        vkrt_context_destroy(ctx);
+        return;
+    }
+    const vkrt_render_desc cases[] = {
+        { .width = 256, .height = 256, .mode = VKRT_MODE_DEPTH, .traversal = VKRT_TRAVERSAL_NAIVE },
+        { .width = 512, .height = 512, .mode = VKRT_MODE_PATH, .spp = 64 },
+    };
+    for (size_t k = 0; k < sizeof cases / sizeof cases[0]; k++) {
+        /* A small render of the same pipelines first: their compilation is not a submission. */
+        vkrt_render_desc warm = cases[k];
+        warm.width = warm.height = 8;
+        warm.spp = 1;
+        free(render_stats(ctx, s, &warm, NULL));
+        progress_log log = { .cancel_at = 12 };
+        vkrt_render_desc d = cases[k];
+        d.progress = log_progress;
+        d.progress_user = &log;
+        size_t n = vkrt_render_floats(d.width, d.height);
+        float *rgba = malloc(n * sizeof *rgba);
+        double t0 = core_now_ms();
+        vkrt_result r = vkrt_render(ctx, s, &d, rgba, n, NULL);
+        double end = core_now_ms();
+        free(rgba);
+        fprintf(stderr, "  case %zu: cancelled after %.0f ms at progress call %u; longest gap between calls %.1f ms, "
+                        "returned %.1f ms after the callback said so\n",
+                k, end - t0, log.calls, log.longest_gap_ms, end - log.cancelled_ms);
+        CHECK_MSG(r == VKRT_ERROR_CANCELLED, "case %zu: %s", k, vkrt_result_string(r));
+        CHECK(strstr(vkrt_context_last_error(ctx), "cancelled") != NULL);
+        CHECK_EQ_U64(log.calls, log.cancel_at);
+        /* 100 ms per submission; generous for a shared 2-core machine with validation on. */
+        CHECK_MSG(log.longest_gap_ms < 1000.0, "case %zu: %.1f ms between progress calls", k, log.longest_gap_ms);
+        CHECK_MSG(end - log.cancelled_ms < 250.0, "case %zu: returned %.1f ms after cancelling", k, end - log.cancelled_ms);
+    }
+    /* vkrt_trace_rays too: a million rays, cancelled at the fourth call. */
+    enum { RAYS = 1 << 20 };
+    vkrt_ray *rays = calloc(RAYS, sizeof *rays);
+    vkrt_hit *hits = malloc(RAYS * sizeof *hits);
+    for (int i = 0; rays && i < RAYS; i++)
+        rays[i] = (vkrt_ray){ .origin = { 0.0f, 0.0f, 2.0f }, .dir = { (float)(i % 1024) / 2048.0f - 0.25f,
+                                                                      (float)(i / 1024) / 2048.0f - 0.25f, -1.0f } };
+    progress_log log = { .cancel_at = 4 };
+    vkrt_trace_desc td = { .traversal = VKRT_TRAVERSAL_NAIVE, .progress = log_progress, .progress_user = &log };
+    vkrt_result r = vkrt_trace_rays(ctx, s, &td, rays, RAYS, hits);
+    double end = core_now_ms();
+    CHECK_MSG(r == VKRT_ERROR_CANCELLED, "trace_rays: %s", vkrt_result_string(r));
+    CHECK_MSG(end - log.cancelled_ms < 250.0, "trace_rays returned %.1f ms after cancelling", end - log.cancelled_ms);
+    free(rays);
+    free(hits);
+    /* Still usable. */
+    free(render_stats(ctx, s, &(vkrt_render_desc){ .width = 16, .height = 16 }, NULL));
+    CHECK_EQ_U64(vkrt_context_validation_messages(ctx), 0);
+    vkrt_scene_destroy(s);
+    const unsigned before = log_errors;
+    vkrt_context_destroy(ctx);
+    CHECK_MSG(log_errors == before, "Vulkan objects left behind at vkDestroyDevice");
+    CHECK_MSG(live_blocks == 0, "%ld host blocks leaked", live_blocks);
+}
+
 int main(void)
 {
     vkrt_context *cpu = NULL;
@@ -294,6 +503,8 @@ int main(void)
     RUN(split_scene_renders_as_one_buffer);
     RUN(split_scene_lights_as_one_buffer);
     RUN(ten_million_triangles_match_the_cpu_reference);
+    RUN(smallest_submissions_give_identical_results);
+    RUN(progress_cancels_within_one_submission);
     CHECK_EQ_U64(vkrt_context_validation_messages(gpu), 0);
     CHECK_EQ_U64(log_errors, 0);
     vkrt_context_destroy(gpu);
