@@ -224,6 +224,7 @@ vkrt_result gpu_scene_upload_surfaces(vk_context *vk, gpu_scene *s, const gpu_su
 typedef struct render_objects {
     VkImage image;
     VkDeviceMemory image_memory;
+    VkMemoryAllocateInfo image_allocation; /* its size and type */
     VkImageView view;
     vk_buffer readback;
     vk_buffer hits;
@@ -243,7 +244,7 @@ static void render_objects_destroy(vk_context *vk, render_objects *o)
     if (o->pool) vkDestroyDescriptorPool(vk->device, o->pool, NULL);
     if (o->view) vkDestroyImageView(vk->device, o->view, NULL);
     if (o->image) vkDestroyImage(vk->device, o->image, NULL);
-    if (o->image_memory) vkFreeMemory(vk->device, o->image_memory, NULL);
+    vk_memory_free(vk, o->image_memory, &o->image_allocation);
     vk_buffer_destroy(vk, &o->readback);
     vk_buffer_destroy(vk, &o->hits);
     vk_buffer_destroy(vk, &o->rays);
@@ -285,8 +286,9 @@ static vkrt_result create_image(vk_context *vk, uint32_t w, uint32_t h, render_o
         .allocationSize = req.size,
         .memoryTypeIndex = (uint32_t)type,
     };
-    res = vkAllocateMemory(vk->device, &alloc, NULL, &o->image_memory);
-    if (res != VK_SUCCESS) return vk_fail(vk, res, "vkAllocateMemory (tile image)");
+    vkrt_result r = vk_memory_allocate(vk, &alloc, "the tile image", &o->image_memory);
+    if (r != VKRT_OK) return r;
+    o->image_allocation = alloc;
     res = vkBindImageMemory(vk->device, o->image, o->image_memory, 0);
     if (res != VK_SUCCESS) return vk_fail(vk, res, "vkBindImageMemory");
     VkImageViewCreateInfo view = {

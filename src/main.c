@@ -54,6 +54,7 @@ static int exit_code_for(vkrt_result r)
     case VKRT_ERROR_NO_DEVICE:
     case VKRT_ERROR_VULKAN:
     case VKRT_ERROR_OUT_OF_DEVICE_MEMORY:
+    case VKRT_ERROR_DEVICE_LOST:
     case VKRT_ERROR_LIMIT: return EXIT_DEVICE;
     default: return EXIT_INTERNAL;
     }

@@ -28,7 +28,22 @@ vkrt_result vk_fail(vk_context *vk, VkResult result, const char *call)
     vkrt_result r = VKRT_ERROR_VULKAN;
     if (result == VK_ERROR_OUT_OF_HOST_MEMORY) r = VKRT_ERROR_OUT_OF_MEMORY;
     else if (result == VK_ERROR_OUT_OF_DEVICE_MEMORY) r = VKRT_ERROR_OUT_OF_DEVICE_MEMORY;
+    else if (result == VK_ERROR_DEVICE_LOST) r = VKRT_ERROR_DEVICE_LOST;
+    if (r == VKRT_ERROR_DEVICE_LOST) {
+        vk->lost = true;
+        return core_fail(vk->core, r, "%s failed: %s: the device was lost (reset, hung or removed); destroy the "
+                                      "context, and its scenes, and create a new one",
+                         call, vk_result_string(result));
+    }
     return core_fail(vk->core, r, "%s failed: %s", call, vk_result_string(result));
+}
+
+vkrt_result vk_check_lost(vk_context *vk)
+{
+    if (!vk->lost) return VKRT_OK;
+    return core_fail(vk->core, VKRT_ERROR_DEVICE_LOST,
+                     "the Vulkan device was lost in an earlier call; destroy the context, and its scenes, and "
+                     "create a new one");
 }
 
 void vk_label(vk_context *vk, VkObjectType type, uint64_t handle, const char *name)
@@ -398,7 +413,11 @@ void vk_context_destroy(vk_context *vk)
 {
     if (!vk) return;
     if (vk->device) {
+        /* A lost device answers at once (VK_ERROR_DEVICE_LOST); a hung submission's objects can
+         * only be freed once the device is idle. */
         vkDeviceWaitIdle(vk->device);
+        if (vk->hung_fence) vkDestroyFence(vk->device, vk->hung_fence, NULL);
+        if (vk->hung_commands) vkFreeCommandBuffers(vk->device, vk->command_pool, 1, &vk->hung_commands);
         vk_pipelines_destroy(vk);
         save_pipeline_cache(vk);
         if (vk->pipeline_cache) vkDestroyPipelineCache(vk->device, vk->pipeline_cache, NULL);

@@ -20,6 +20,9 @@
  *   log callback of the context, if one is given.
  * - Thread-safety: calls on the same object are not thread-safe unless noted; different
  *   contexts may be used from different threads at once.
+ * - Device failures: VKRT_ERROR_OUT_OF_DEVICE_MEMORY leaves the context usable (free something
+ *   and retry); VKRT_ERROR_DEVICE_LOST is final: every later call on the context that needs the
+ *   device fails with it at once, and the context (and its scenes) can only be destroyed.
  */
 #ifndef VKRT_H
 #define VKRT_H
@@ -55,7 +58,8 @@ uint32_t vkrt_version(void);
     X(VKRT_ERROR_VULKAN, "Vulkan call failed")                                             \
     X(VKRT_ERROR_OUT_OF_DEVICE_MEMORY, "out of device memory")                             \
     X(VKRT_ERROR_LIMIT, "the scene exceeds a limit of the device or of vkrt")              \
-    X(VKRT_ERROR_CANCELLED, "cancelled by the progress callback")
+    X(VKRT_ERROR_CANCELLED, "cancelled by the progress callback")                          \
+    X(VKRT_ERROR_DEVICE_LOST, "the Vulkan device was lost (reset, hung or removed)")
 
 typedef enum vkrt_result {
 #define VKRT_RESULT_ENUM_(name, message) name,
@@ -223,9 +227,11 @@ typedef struct vkrt_scene_desc {
 typedef struct vkrt_scene vkrt_scene;
 
 /* Loads a mesh (or makes the built-in scene), builds its BVH and, for the GPU backend,
- * uploads it. Bad input returns VKRT_ERROR_IO, _PARSE, _INVALID_GEOMETRY, _EMPTY_SCENE or
- * _UNSUPPORTED with a message naming the file and the problem. The scene belongs to ctx and
- * must be destroyed before it. */
+ * uploads it (split across storage buffers where its triangles exceed one; see
+ * vkrt_scene_stats.device_buffers). Bad input returns VKRT_ERROR_IO, _PARSE, _INVALID_GEOMETRY,
+ * _EMPTY_SCENE or _UNSUPPORTED with a message naming the file and the problem; a device that
+ * cannot hold the scene VKRT_ERROR_OUT_OF_DEVICE_MEMORY, or VKRT_ERROR_LIMIT where it cannot
+ * split it. The scene belongs to ctx and must be destroyed before it. */
 vkrt_result vkrt_scene_create(vkrt_context *ctx, const vkrt_scene_desc *desc, vkrt_scene **out_scene);
 void vkrt_scene_destroy(vkrt_scene *scene);
 
@@ -435,7 +441,9 @@ size_t vkrt_render_floats(uint32_t width, uint32_t height);
 
 /* Traces one primary ray per pixel and writes raw values (see vkrt_mode) into out_rgba.
  * out_rgba must hold out_floats >= vkrt_render_floats(width, height) floats (borrowed for the
- * call). stats may be NULL. */
+ * call). stats may be NULL. Returns VKRT_ERROR_CANCELLED when the progress callback says so
+ * (out_rgba is then incomplete), VKRT_ERROR_OUT_OF_DEVICE_MEMORY or VKRT_ERROR_DEVICE_LOST (see
+ * the conventions above). */
 vkrt_result vkrt_render(vkrt_context *ctx, vkrt_scene *scene, const vkrt_render_desc *desc,
                         float *out_rgba, size_t out_floats, vkrt_render_stats *out_stats);
 

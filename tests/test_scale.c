@@ -2,7 +2,9 @@
  * storage buffers render exactly as the same scenes in one buffer each, and a procedurally
  * generated scene of ten million triangles (beyond lavapipe's 128 MiB maxStorageBufferRange)
  * matches the CPU reference; submissions stay near their target time, the smallest ones give
- * the same images, and the progress callback cancels promptly, leaving nothing behind. Any
+ * the same images, and the progress callback cancels promptly, leaving nothing behind; out of
+ * device memory, a lost device and a failed host allocation each return their own code with a
+ * message, leak nothing and never hang (injected through the test knobs of vk_context). Any
  * validation message fails the test. */
 #include <stdlib.h>
 #include <string.h>
@@ -25,12 +27,14 @@ static void on_log(void *user, vkrt_log_level level, const char *message)
     }
 }
 
-/* Host memory of a context made for a leak check: blocks live. */
+/* Host memory of a context made for a leak check: blocks live, and an allocation to refuse. */
 static long live_blocks;
+static long alloc_calls, alloc_fail_at; /* 1-based; 0: refuse none */
 
 static void *counting_alloc(void *user, size_t size)
 {
     (void)user;
+    if (alloc_fail_at && ++alloc_calls == alloc_fail_at) return NULL;
     void *p = malloc(size);
     if (p) live_blocks++;
     return p;
@@ -494,6 +498,307 @@ static void progress_cancels_within_one_submission(void)
     CHECK_MSG(live_blocks == 0, "%ld host blocks leaked", live_blocks);
 }
 
+/* ---- device failures ---- */
+
+/* One operation on a context's scene whose failures are checked. */
+typedef vkrt_result (*scene_op)(vkrt_context *ctx, vkrt_scene *s);
+
+static vkrt_result op_render(vkrt_context *ctx, vkrt_scene *s)
+{
+    float rgba[24 * 16 * 4];
+    return vkrt_render(ctx, s, &(vkrt_render_desc){ .width = 24, .height = 16, .mode = VKRT_MODE_DEPTH }, rgba,
+                       sizeof rgba / sizeof rgba[0], NULL);
+}
+
+/* The first albedo render uploads the surfaces (split, in a split scene). */
+static vkrt_result op_albedo(vkrt_context *ctx, vkrt_scene *s)
+{
+    float rgba[16 * 16 * 4];
+    return vkrt_render(ctx, s, &(vkrt_render_desc){ .width = 16, .height = 16, .mode = VKRT_MODE_ALBEDO }, rgba,
+                       sizeof rgba / sizeof rgba[0], NULL);
+}
+
+static vkrt_result op_path(vkrt_context *ctx, vkrt_scene *s)
+{
+    float rgba[16 * 12 * 4];
+    return vkrt_render(ctx, s, &(vkrt_render_desc){ .width = 16, .height = 12, .mode = VKRT_MODE_PATH, .spp = 2 },
+                       rgba, sizeof rgba / sizeof rgba[0], NULL);
+}
+
+static vkrt_result op_naive(vkrt_context *ctx, vkrt_scene *s)
+{
+    float rgba[16 * 16 * 4];
+    return vkrt_render(ctx, s, &(vkrt_render_desc){ .width = 16, .height = 16, .traversal = VKRT_TRAVERSAL_NAIVE },
+                       rgba, sizeof rgba / sizeof rgba[0], NULL);
+}
+
+static vkrt_result op_rays(vkrt_context *ctx, vkrt_scene *s)
+{
+    vkrt_ray rays[100];
+    vkrt_hit hits[100];
+    for (int i = 0; i < 100; i++)
+        rays[i] = (vkrt_ray){ .origin = { 0.01f * (float)(i - 50), 0.0f, 2.0f }, .dir = { 0.0f, 0.0f, -1.0f } };
+    return vkrt_trace_rays(ctx, s, &(vkrt_trace_desc){ 0 }, rays, 100, hits);
+}
+
+static const struct {
+    const char *name;
+    scene_op op;
+} scene_ops[] = { { "render", op_render },   { "albedo render", op_albedo }, { "path render", op_path },
+                  { "naive render", op_naive }, { "trace_rays", op_rays } };
+
+/* The context's first trace makes its lasting pipeline state (one host block): done before the
+ * sweeps, which then see only what a call makes and frees. */
+static void warm_up(vkrt_context *ctx)
+{
+    vkrt_scene *s = NULL;
+    CHECK(vkrt_scene_create(ctx, &(vkrt_scene_desc){ 0 }, &s) == VKRT_OK);
+    if (s) CHECK(op_render(ctx, s) == VKRT_OK);
+    vkrt_scene_destroy(s);
+}
+
+static vkrt_scene *bunny_scene(vkrt_context *ctx, VkDeviceSize limit, vkrt_result *out_r)
+{
+    ctx->vk->scene_buffer_limit = limit;
+    vkrt_scene *s = NULL;
+    *out_r = vkrt_scene_create(ctx, &(vkrt_scene_desc){ .path = VKRT_MODELS_DIR "/meshes/bunny.obj" }, &s);
+    ctx->vk->scene_buffer_limit = 0;
+    return s;
+}
+
+/* A device memory budget of 200 KiB cannot hold the bunny's 370 KB of nodes and triangles:
+ * scene creation fails with VKRT_ERROR_OUT_OF_DEVICE_MEMORY and a message naming the budget,
+ * frees every host block and device allocation it made, and the context goes on (the scene
+ * loads once the budget is lifted). A budget that holds the scene but not a render's buffers
+ * (1 KiB to spare) fails every kind of render and trace the same way; lifted, they succeed. */
+static void small_memory_budget_fails_cleanly(void)
+{
+    vkrt_context *ctx = counted_context();
+    if (!ctx) return;
+    warm_up(ctx);
+    const long blocks = live_blocks;
+    const VkDeviceSize held = ctx->vk->memory_in_use;
+    ctx->vk->memory_budget = 200 << 10;
+    vkrt_result r;
+    vkrt_scene *s = bunny_scene(ctx, 0, &r);
+    CHECK_MSG(r == VKRT_ERROR_OUT_OF_DEVICE_MEMORY && !s, "scene under a 200 KiB budget: %s", vkrt_result_string(r));
+    CHECK_MSG(strstr(vkrt_context_last_error(ctx), "out of device memory") &&
+                  strstr(vkrt_context_last_error(ctx), "budget"),
+              "message: %s", vkrt_context_last_error(ctx));
+    fprintf(stderr, "  %s\n", vkrt_context_last_error(ctx));
+    CHECK_EQ_U64(live_blocks, blocks);
+    CHECK_EQ_U64(ctx->vk->memory_in_use, held);
+    ctx->vk->memory_budget = 0;
+    s = bunny_scene(ctx, 0, &r);
+    CHECK_MSG(r == VKRT_OK, "scene without a budget: %s", vkrt_context_last_error(ctx));
+    if (s) {
+        const VkDeviceSize scene_bytes = ctx->vk->memory_in_use;
+        ctx->vk->memory_budget = scene_bytes + 1024;
+        for (size_t k = 0; k < sizeof scene_ops / sizeof scene_ops[0]; k++) {
+            const long before = live_blocks;
+            r = scene_ops[k].op(ctx, s);
+            CHECK_MSG(r == VKRT_ERROR_OUT_OF_DEVICE_MEMORY, "%s with 1 KiB to spare: %s", scene_ops[k].name,
+                      vkrt_result_string(r));
+            CHECK_EQ_U64(live_blocks, before);
+            CHECK_EQ_U64(ctx->vk->memory_in_use, scene_bytes);
+        }
+        ctx->vk->memory_budget = 0;
+        for (size_t k = 0; k < sizeof scene_ops / sizeof scene_ops[0]; k++)
+            CHECK_MSG(scene_ops[k].op(ctx, s) == VKRT_OK, "%s after the budget is lifted: %s", scene_ops[k].name,
+                      vkrt_context_last_error(ctx));
+    }
+    vkrt_scene_destroy(s);
+    CHECK_EQ_U64(ctx->vk->memory_in_use, held);
+    const unsigned before = log_errors;
+    vkrt_context_destroy(ctx);
+    CHECK_MSG(log_errors == before, "Vulkan objects left behind at vkDestroyDevice");
+    CHECK_MSG(live_blocks == 0, "%ld host blocks leaked", live_blocks);
+}
+
+/* Device allocation N fails (N = 1, 2, ... until the call succeeds) in creating a split scene
+ * (64 KiB buffers: eight pieces and a piece table) and in every kind of render and trace: each
+ * failure is VKRT_ERROR_OUT_OF_DEVICE_MEMORY with a message, and leaves the host blocks, the
+ * device memory and the context as they were. */
+static void every_failed_device_allocation_is_out_of_device_memory(void)
+{
+    vkrt_context *ctx = counted_context();
+    if (!ctx) return;
+    warm_up(ctx);
+    vk_context *vk = ctx->vk;
+    uint32_t n = 1;
+    vkrt_scene *s = NULL;
+    for (;; n++) {
+        const long blocks = live_blocks;
+        const VkDeviceSize held = vk->memory_in_use;
+        vk->fail_allocation = n;
+        vkrt_result r;
+        s = bunny_scene(ctx, 64 << 10, &r);
+        const bool fired = vk->fail_allocation == 0;
+        vk->fail_allocation = 0;
+        if (!fired) {
+            CHECK_MSG(r == VKRT_OK, "scene with %u allocations: %s", n - 1, vkrt_context_last_error(ctx));
+            break;
+        }
+        CHECK_MSG(r == VKRT_ERROR_OUT_OF_DEVICE_MEMORY && !s, "scene, device allocation %u failed: %s", n,
+                  vkrt_result_string(r));
+        CHECK_MSG(strstr(vkrt_context_last_error(ctx), "out of device memory") != NULL, "message: %s",
+                  vkrt_context_last_error(ctx));
+        CHECK_EQ_U64(live_blocks, blocks);
+        CHECK_EQ_U64(vk->memory_in_use, held);
+        vkrt_scene_destroy(s);
+        s = NULL;
+    }
+    fprintf(stderr, "  split scene: %u device allocations, each failure clean\n", n - 1);
+    for (size_t k = 0; s && k < sizeof scene_ops / sizeof scene_ops[0]; k++) {
+        for (n = 1;; n++) {
+            const long blocks = live_blocks;
+            const VkDeviceSize held = vk->memory_in_use;
+            vkrt_scene_stats before;
+            vkrt_scene_stats_get(s, &before);
+            vk->fail_allocation = n;
+            vkrt_result r = scene_ops[k].op(ctx, s);
+            const bool fired = vk->fail_allocation == 0;
+            vk->fail_allocation = 0;
+            if (!fired) {
+                CHECK_MSG(r == VKRT_OK, "%s: %s", scene_ops[k].name, vkrt_context_last_error(ctx));
+                break;
+            }
+            CHECK_MSG(r == VKRT_ERROR_OUT_OF_DEVICE_MEMORY, "%s, device allocation %u failed: %s", scene_ops[k].name,
+                      n, vkrt_result_string(r));
+            /* What stays is the scene's: the surfaces, once uploaded before the failure. */
+            vkrt_scene_stats after;
+            vkrt_scene_stats_get(s, &after);
+            CHECK_MSG(vk->memory_in_use - held == after.device_bytes - before.device_bytes && live_blocks == blocks,
+                      "%s, allocation %u: device memory %llu, was %llu; %ld more host blocks", scene_ops[k].name, n,
+                      (unsigned long long)vk->memory_in_use, (unsigned long long)held, live_blocks - blocks);
+        }
+        fprintf(stderr, "  %s: %u device allocations, each failure clean\n", scene_ops[k].name, n - 1);
+    }
+    vkrt_scene_destroy(s);
+    const unsigned before = log_errors;
+    vkrt_context_destroy(ctx);
+    CHECK_MSG(log_errors == before, "Vulkan objects left behind at vkDestroyDevice");
+    CHECK_MSG(live_blocks == 0, "%ld host blocks leaked", live_blocks);
+}
+
+/* VK_ERROR_DEVICE_LOST from the second submission's vkQueueSubmit or vkWaitForFences (a fence
+ * that times out, too), in every kind of render and trace: the call returns
+ * VKRT_ERROR_DEVICE_LOST with a message; from then on every call that needs the device returns
+ * it at once (scene creation too); the scene and the context are destroyed without a hang,
+ * leaking no host block or Vulkan object. */
+static void lost_device_is_reported_and_final(void)
+{
+    const struct {
+        bool at_wait;
+        VkResult result;
+        const char *what;
+    } failures[] = { { false, VK_ERROR_DEVICE_LOST, "lost at submission" },
+                     { true, VK_ERROR_DEVICE_LOST, "lost at the fence" },
+                     { true, VK_TIMEOUT, "fence timed out" } };
+    for (size_t k = 0; k < sizeof scene_ops / sizeof scene_ops[0]; k++) {
+        for (size_t f = 0; f < sizeof failures / sizeof failures[0]; f++) {
+            /* The timeout once is enough. */
+            if (failures[f].result == VK_TIMEOUT && k != 2) continue;
+            vkrt_context *ctx = counted_context();
+            vkrt_result r;
+            vkrt_scene *s = ctx ? bunny_scene(ctx, k == 0 ? 64 << 10 : 0, &r) : NULL;
+            if (!s) {
+                vkrt_context_destroy(ctx);
+                continue;
+            }
+            /* The second submission of the call (its first where it has one only). */
+            ctx->vk->fail_submission = 2;
+            ctx->vk->fail_result = failures[f].result;
+            ctx->vk->fail_at_wait = failures[f].at_wait;
+            r = scene_ops[k].op(ctx, s);
+            if (ctx->vk->fail_submission) { /* one submission only: fail that */
+                ctx->vk->fail_submission = 1;
+                r = scene_ops[k].op(ctx, s);
+            }
+            CHECK_MSG(r == VKRT_ERROR_DEVICE_LOST, "%s, %s: %s", scene_ops[k].name, failures[f].what,
+                      vkrt_result_string(r));
+            CHECK_MSG(strstr(vkrt_context_last_error(ctx), "lost") != NULL, "message: %s", vkrt_context_last_error(ctx));
+            if (k == 2) fprintf(stderr, "  %s: %s\n", failures[f].what, vkrt_context_last_error(ctx));
+            const double t0 = core_now_ms();
+            for (size_t j = 0; j < sizeof scene_ops / sizeof scene_ops[0]; j++)
+                CHECK_MSG(scene_ops[j].op(ctx, s) == VKRT_ERROR_DEVICE_LOST, "%s after the loss", scene_ops[j].name);
+            vkrt_scene *again = bunny_scene(ctx, 0, &r);
+            CHECK_MSG(r == VKRT_ERROR_DEVICE_LOST && !again, "scene after the loss: %s", vkrt_result_string(r));
+            CHECK_MSG(core_now_ms() - t0 < 100.0, "calls after the loss took %.1f ms", core_now_ms() - t0);
+            vkrt_scene_destroy(s);
+            const unsigned before = log_errors;
+            vkrt_context_destroy(ctx);
+            CHECK_MSG(log_errors == before, "%s: Vulkan objects left behind at vkDestroyDevice", scene_ops[k].name);
+            CHECK_MSG(live_blocks == 0, "%s: %ld host blocks leaked", scene_ops[k].name, live_blocks);
+        }
+    }
+}
+
+/* Host allocation N fails (N = 1, 2, ... until no allocation is left to fail) in creating a
+ * split scene and in a naive, a path and an albedo render on it (the albedo render uploads the
+ * split surfaces): VKRT_ERROR_OUT_OF_MEMORY each time with nothing leaked, except where vkrt
+ * tolerates the failure (the BVH builder's shrinking of its node array) and succeeds. */
+static void every_failed_host_allocation_is_out_of_memory(void)
+{
+    vkrt_context *ctx = counted_context();
+    if (!ctx) return;
+    warm_up(ctx);
+    vkrt_scene *s = NULL;
+    long n, tolerated = 0;
+    for (n = 1;; n++) {
+        const long blocks = live_blocks;
+        alloc_calls = 0;
+        alloc_fail_at = n;
+        vkrt_result r;
+        s = bunny_scene(ctx, 64 << 10, &r);
+        const bool fired = alloc_calls >= n;
+        alloc_fail_at = 0;
+        if (!fired) {
+            CHECK_MSG(r == VKRT_OK, "scene: %s", vkrt_context_last_error(ctx));
+            break;
+        }
+        if (r == VKRT_OK) {
+            tolerated++;
+        } else {
+            CHECK_MSG(r == VKRT_ERROR_OUT_OF_MEMORY && !s, "split scene, host allocation %ld failed: %s", n,
+                      vkrt_result_string(r));
+            CHECK_EQ_U64(live_blocks, blocks);
+        }
+        vkrt_scene_destroy(s);
+        s = NULL;
+    }
+    fprintf(stderr, "  split scene: %ld host allocations, each failure clean (%ld tolerated)\n", n - 1, tolerated);
+    CHECK(tolerated <= 1);
+    const struct {
+        const char *name;
+        scene_op op;
+    } ops[] = { { "albedo render", op_albedo }, { "naive render", op_naive }, { "path render", op_path } };
+    for (size_t k = 0; s && k < sizeof ops / sizeof ops[0]; k++) {
+        for (n = 1;; n++) {
+            const long blocks = live_blocks;
+            alloc_calls = 0;
+            alloc_fail_at = n;
+            vkrt_result r = ops[k].op(ctx, s);
+            const bool fired = alloc_calls >= n;
+            alloc_fail_at = 0;
+            if (!fired) {
+                CHECK_MSG(r == VKRT_OK, "%s: %s", ops[k].name, vkrt_context_last_error(ctx));
+                break;
+            }
+            CHECK_MSG(r == VKRT_ERROR_OUT_OF_MEMORY, "%s, host allocation %ld failed: %s", ops[k].name, n,
+                      vkrt_result_string(r));
+            CHECK_MSG(live_blocks == blocks, "%s, allocation %ld: %ld blocks leaked", ops[k].name, n,
+                      live_blocks - blocks);
+        }
+        fprintf(stderr, "  %s: %ld host allocations, each failure clean\n", ops[k].name, n - 1);
+    }
+    vkrt_scene_destroy(s);
+    const unsigned before = log_errors;
+    vkrt_context_destroy(ctx);
+    CHECK_MSG(log_errors == before, "Vulkan objects left behind at vkDestroyDevice");
+    CHECK_MSG(live_blocks == 0, "%ld host blocks leaked", live_blocks);
+}
+
 int main(void)
 {
     vkrt_context *cpu = NULL;
@@ -505,6 +810,10 @@ int main(void)
     RUN(ten_million_triangles_match_the_cpu_reference);
     RUN(smallest_submissions_give_identical_results);
     RUN(progress_cancels_within_one_submission);
+    RUN(small_memory_budget_fails_cleanly);
+    RUN(every_failed_device_allocation_is_out_of_device_memory);
+    RUN(lost_device_is_reported_and_final);
+    RUN(every_failed_host_allocation_is_out_of_memory);
     CHECK_EQ_U64(vkrt_context_validation_messages(gpu), 0);
     CHECK_EQ_U64(log_errors, 0);
     vkrt_context_destroy(gpu);
