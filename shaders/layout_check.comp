@@ -21,6 +21,7 @@ layout(std430, set = 0, binding = 11) readonly buffer Lights { vkrt_gpu_light li
 layout(std430, set = 0, binding = 12) readonly buffer Lighting { vkrt_gpu_lighting lightings[]; };
 layout(std430, set = 0, binding = 13) readonly buffer Paths { vkrt_gpu_path paths[]; };
 layout(std430, set = 0, binding = 14) readonly buffer Accums { vkrt_gpu_accum accums[]; };
+layout(std430, set = 0, binding = 15) readonly buffer Addresses { vkrt_gpu_address addresses[]; };
 layout(push_constant) uniform PushBlock { vkrt_gpu_push p; };
 
 uint k = 0;
@@ -70,4 +71,6 @@ void main()
     put(q.pending); put(q.rng_dim);
     vkrt_gpu_accum a = accums[1];
     put(a.sum); put(a.samples); put(a.lum_sum); put(a.lum_sq_sum); put(a.done); put(a.alpha);
+    vkrt_gpu_address d = addresses[1];
+    put(d.lo); put(d.hi);
 }

@@ -5,6 +5,10 @@
  * src/cpu_integrate.c, which run the same stages in the same order on the CPU. */
 #version 460
 #extension GL_GOOGLE_include_directive : require
+#ifdef VKRT_HAS_BUFFER_ADDRESS
+#extension GL_EXT_buffer_reference : require
+#extension GL_EXT_buffer_reference_uvec2 : require
+#endif
 
 #include "vkrt_shared.h"
 
@@ -13,6 +17,7 @@ layout(local_size_x = VKRT_TRACE_GROUP_X, local_size_y = VKRT_TRACE_GROUP_Y, loc
 layout(constant_id = VKRT_SPEC_SHADE_STAGE) const uint STAGE = VKRT_STAGE_CAMERA;
 layout(constant_id = VKRT_SPEC_SHADE_MODE) const uint MODE = VKRT_GPU_MODE_PATH;
 layout(constant_id = VKRT_SPEC_SHADE_FEATURES) const uint FEATURES = VKRT_GPU_FEATURE_ALL;
+layout(constant_id = VKRT_SPEC_SHADE_SPLIT) const uint SPLIT = 0u;
 
 layout(set = 0, binding = VKRT_SHADE_BINDING_TRIS, std430) readonly buffer Tris { vkrt_gpu_tri tris[]; };
 layout(set = 0, binding = VKRT_SHADE_BINDING_SURFACES, std430) readonly buffer Surfaces { vkrt_gpu_surface surfaces[]; };
@@ -36,12 +41,15 @@ layout(set = 0, binding = VKRT_SHADE_BINDING_ACTIVE, std430) buffer Active {
 };
 layout(set = 0, binding = VKRT_SHADE_BINDING_QUEUE, std430) buffer Queue { uint queue[]; };
 layout(set = 0, binding = VKRT_SHADE_BINDING_LIGHTING, std430) readonly buffer Lighting { vkrt_gpu_lighting lighting; };
+/* A split scene's piece addresses (see trace.comp). */
+layout(set = 0, binding = VKRT_SHADE_BINDING_PIECES, std430) readonly buffer Pieces { vkrt_gpu_address pieces[]; };
 layout(push_constant, std430) uniform Push {
     vkrt_gpu_push p;
 };
 
 /* trace_common.glsl's intersectors are unused here; ISECT only lets it compile. */
 const uint ISECT = VKRT_GPU_ISECT_WATERTIGHT;
+#include "scene_arrays.glsl"
 #include "trace_common.glsl"
 #include "texture.glsl"
 #include "sampler.glsl"
@@ -128,7 +136,7 @@ void stage_hit()
         }
         return;
     }
-    vkrt_gpu_tri tri = tris[h.tri];
+    vkrt_gpu_tri tri = load_tri(h.tri);
     vec3 pos, ng, ns;
     hit_geometry(tri, h.u, h.v, dir, pos, ng, ns);
     material_sample m = material_at(tri.prim_id, h.u, h.v);

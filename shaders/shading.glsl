@@ -1,8 +1,8 @@
 /* Materials, lights, the sky and the BSDF of the lighting modes: the GPU half of src/shading.c,
  * function for function (the same names without the sh_ prefix, the arithmetic in the same
  * order); see src/shading.h for the model and the papers. shade.comp declares the buffers
- * (tris, surfaces, materials, textures, texels, lights, lighting) and the FEATURES constant
- * before including this file. */
+ * (materials, textures, texels, lights, lighting), the FEATURES constant and the scene's
+ * arrays (scene_arrays.glsl: load_tri, load_surface) before including this file. */
 #ifndef VKRT_SHADING_GLSL
 #define VKRT_SHADING_GLSL
 
@@ -62,7 +62,7 @@ void hit_geometry(vkrt_gpu_tri tri, float u, float v, vec3 ray_dir, out vec3 p, 
 
 material_sample material_at(uint prim, float u, float v)
 {
-    vkrt_gpu_surface f = surfaces[prim];
+    vkrt_gpu_surface f = load_surface(prim);
     vkrt_gpu_material g = materials[f.material];
     material_sample m = material_sample(g.base_color, g.metallic, g.roughness, g.emissive);
     if ((FEATURES & VKRT_GPU_FEATURE_TEXTURES) != 0u) {
@@ -259,7 +259,7 @@ light_sample sample_light(vkrt_gpu_light light, vec3 p, vec3 ng, float u0, float
         o.ray = vkrt_gpu_ray(origin, 0.0, d, 1.0);
         o.pdf = 0.0;
     } else if ((FEATURES & VKRT_GPU_FEATURE_EMITTERS) != 0u) {
-        vkrt_gpu_tri tri = tris[light.tri];
+        vkrt_gpu_tri tri = load_tri(light.tri);
         float r = sqrt(u0);
         float b1 = r * (1.0 - u1), b2 = r * u1;
         precise vec3 y = (tri.v0 * (1.0 - b1 - b2) + tri.v1 * b1) + tri.v2 * b2;
@@ -282,7 +282,7 @@ light_sample sample_light(vkrt_gpu_light light, vec3 p, vec3 ng, float u0, float
 
 float emitter_pdf(vkrt_gpu_tri tri, vec3 dir, float t)
 {
-    vkrt_gpu_material g = materials[surfaces[tri.prim_id].material];
+    vkrt_gpu_material g = materials[load_surface(tri.prim_id).material];
     float area = triangle_area(tri);
     float cos_l = abs(dot3(tri.face_n, dir));
     if (!(area > 0.0) || !(cos_l > 0.0)) return 0.0;

@@ -1,11 +1,16 @@
 /* One primary ray per pixel of a tile (RAYGEN camera), or one ray of the ray buffer per
  * invocation (RAYGEN buffer, vkrt_trace_rays). The mode, traversal, heat kind, ray source,
- * intersector, loop budget and traversal counters are specialization constants, so each
+ * intersector, loop budget, traversal counters, alpha test, any-hit and the scene's split
+ * across buffers are specialization constants, so each
  * pipeline keeps only the code it uses.
  * Mirrors trace_pixel(), trace_one_ray() and their callees in src/cpu_trace.c and
  * src/cpu_trace_real.h. */
 #version 460
 #extension GL_GOOGLE_include_directive : require
+#ifdef VKRT_HAS_BUFFER_ADDRESS
+#extension GL_EXT_buffer_reference : require
+#extension GL_EXT_buffer_reference_uvec2 : require
+#endif
 
 #include "vkrt_shared.h"
 
@@ -21,6 +26,7 @@ layout(constant_id = VKRT_SPEC_COUNTERS) const uint COUNTERS = 0u;
 layout(constant_id = VKRT_SPEC_ALPHA) const uint ALPHA = 0u;
 layout(constant_id = VKRT_SPEC_ANYHIT) const uint ANYHIT = 0u;
 layout(constant_id = VKRT_SPEC_TEXTURES) const uint TEXTURES = 0u;
+layout(constant_id = VKRT_SPEC_SPLIT) const uint SPLIT = 0u;
 
 layout(set = 0, binding = VKRT_BINDING_NODES, std430) readonly buffer Nodes {
     vkrt_gpu_node nodes[];
@@ -68,10 +74,17 @@ layout(set = 0, binding = VKRT_BINDING_TEXTURES, std430) readonly buffer Texture
 layout(set = 0, binding = VKRT_BINDING_TEXELS, std430) readonly buffer Texels {
     uvec2 texels[]; /* linear RGBA as halves: (R | G << 16, B | A << 16) */
 };
+/* A split scene's piece addresses (a placeholder otherwise): the nodes, triangles and surfaces
+ * bindings then hold only the first piece of each. */
+layout(set = 0, binding = VKRT_BINDING_PIECES, std430) readonly buffer Pieces {
+    vkrt_gpu_address pieces[];
+};
 layout(push_constant, std430) uniform Push {
     vkrt_gpu_push p;
 };
 
+#define VKRT_SCENE_NODES
+#include "scene_arrays.glsl"
 #include "trace_common.glsl"
 
 struct hit {
@@ -95,7 +108,7 @@ bool alpha_passes(uint prim, float u, float v);
  * src/cpu_trace_real.h. */
 void test_triangle(ray r, uint index, inout hit best)
 {
-    vkrt_gpu_tri tri = tris[index];
+    vkrt_gpu_tri tri = load_tri(index);
     float t, u, v;
     if (intersect_triangle(r, tri, t, u, v) && hit_closer(t, tri.prim_id, best.t, best.prim) &&
         (ALPHA == 0u || alpha_passes(tri.prim_id, u, v))) {
@@ -143,12 +156,13 @@ bool trace_bvh(ray r, uint slot, inout hit best, inout heat_counts heat)
         }
     } else {
         float tnear;
-        if (!intersect_box(r, nodes[0].bmin, nodes[0].bmax, best.t, tnear)) {
+        vkrt_gpu_node root = load_node(0u);
+        if (!intersect_box(r, root.bmin, root.bmax, best.t, tnear)) {
             mark_finished(slot);
             return true;
         }
         heat.nodes++;
-        if (nodes[0].tri_count != 0u) heat.leaves++;
+        if (root.tri_count != 0u) heat.leaves++;
         node = 0u;
     }
     uint steps = 0u;
@@ -169,14 +183,14 @@ bool trace_bvh(ray r, uint slot, inout hit best, inout heat_counts heat)
             node = stack_node[sp];
         }
         if (node != NO_NODE) {
-            vkrt_gpu_node n = nodes[node];
+            vkrt_gpu_node n = load_node(node);
             node = NO_NODE;
             if (n.tri_count != 0u) {
                 tri_next = n.left_first;
                 tri_end = n.left_first + n.tri_count;
             } else {
                 uint left = n.left_first, right = left + 1u;
-                vkrt_gpu_node ln = nodes[left], rn = nodes[right];
+                vkrt_gpu_node ln = load_node(left), rn = load_node(right);
                 float tl, tr;
                 bool hit_l = intersect_box(r, ln.bmin, ln.bmax, best.t, tl);
                 bool hit_r = intersect_box(r, rn.bmin, rn.bmax, best.t, tr);
@@ -242,7 +256,7 @@ bool already_finished(uint slot)
  * src/cpu_trace.c. */
 bool alpha_passes(uint prim, float u, float v)
 {
-    vkrt_gpu_surface f = surfaces[prim];
+    vkrt_gpu_surface f = load_surface(prim);
     vkrt_gpu_material m = materials[f.material];
     if (!(m.alpha_cutoff > 0.0)) return true;
     precise float alpha = m.alpha;
@@ -273,10 +287,10 @@ vec4 shade(hit best, heat_counts heat)
         return is_hit ? vec4(best.t, 0.0, 0.0, 1.0) : vec4(VKRT_MISS, 0.0, 0.0, 0.0);
     if (MODE == VKRT_GPU_MODE_ID)
         return is_hit ? vec4(float(best.prim), best.u, best.v, 1.0) : vec4(VKRT_MISS, 0.0, 0.0, 0.0);
-    if (MODE == VKRT_GPU_MODE_ALBEDO) return is_hit ? shade_albedo(surfaces[best.prim], best.u, best.v) : vec4(0.0);
-    if (MODE == VKRT_GPU_MODE_UV) return is_hit ? vec4(surface_uv(surfaces[best.prim], best.u, best.v), 0.0, 1.0) : vec4(0.0);
+    if (MODE == VKRT_GPU_MODE_ALBEDO) return is_hit ? shade_albedo(load_surface(best.prim), best.u, best.v) : vec4(0.0);
+    if (MODE == VKRT_GPU_MODE_UV) return is_hit ? vec4(surface_uv(load_surface(best.prim), best.u, best.v), 0.0, 1.0) : vec4(0.0);
     if (!is_hit) return vec4(0.0);
-    return shade_normal(tris[best.tri], best.u, best.v);
+    return shade_normal(load_tri(best.tri), best.u, best.v);
 }
 
 /* The final closest hit of pixel (x, y): its distance refined (refine_hit_distance) where the
@@ -287,7 +301,7 @@ void finish_pixel_hit(uint x, uint y, inout hit best)
     if (MODE == VKRT_GPU_MODE_DEPTH && best.prim != NO_PRIM) {
         dvec3 origin, dir;
         camera_ray_double(p, x, y, origin, dir);
-        best.t = refine_hit_distance(origin, dir, 0.0LF, double(T_INFINITY), tris[best.tri], best.t);
+        best.t = refine_hit_distance(origin, dir, 0.0LF, double(T_INFINITY), load_tri(best.tri), best.t);
     }
 #endif
 }
@@ -298,7 +312,7 @@ void finish_ray_hit(ray r, inout hit best)
 {
 #ifdef VKRT_HAS_FLOAT64
     if (best.prim != NO_PRIM)
-        best.t = refine_hit_distance(dvec3(r.origin), dvec3(r.dir), double(r.tmin), double(r.tmax), tris[best.tri], best.t);
+        best.t = refine_hit_distance(dvec3(r.origin), dvec3(r.dir), double(r.tmin), double(r.tmax), load_tri(best.tri), best.t);
 #endif
 }
 
@@ -312,7 +326,7 @@ void restore_carried(uint slot, inout hit best)
         best.u = carried.u;
         best.v = carried.v;
         best.tri = carried.tri;
-        best.prim = tris[carried.tri].prim_id;
+        best.prim = load_tri(carried.tri).prim_id;
     }
 }
 

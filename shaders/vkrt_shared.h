@@ -42,7 +42,8 @@ typedef struct vkrt_float3 { float x, y, z; } vkrt_float3;
 #define VKRT_BINDING_MATERIALS 10      /* vkrt_gpu_material table (albedo) */
 #define VKRT_BINDING_TEXTURES 11       /* vkrt_gpu_texture table (albedo) */
 #define VKRT_BINDING_TEXELS 12         /* every texture's texels: linear RGBA as 4 halves (uvec2) */
-#define VKRT_BINDING_COUNT 13          /* bindings 0 .. 12: the image one, storage buffers the rest */
+#define VKRT_BINDING_PIECES 13         /* vkrt_gpu_address piece table of a split scene (VKRT_SPEC_SPLIT) */
+#define VKRT_BINDING_COUNT 14          /* bindings 0 .. 13: the image one, storage buffers the rest */
 
 /* Descriptor bindings of shade.comp (set 0): the lighting modes' wavefront stages. The ray and
  * hit buffers are the ones trace.comp reads and writes in its wavefront variant. */
@@ -61,7 +62,8 @@ typedef struct vkrt_float3 { float x, y, z; } vkrt_float3;
 #define VKRT_SHADE_BINDING_ACTIVE 12     /* one uint: pixels sampling / paths still going */
 #define VKRT_SHADE_BINDING_LIGHTING 13   /* one vkrt_gpu_lighting */
 #define VKRT_SHADE_BINDING_QUEUE 14      /* two queues of a tile's pixel slots (uint), in and out */
-#define VKRT_SHADE_BINDING_COUNT 15
+#define VKRT_SHADE_BINDING_PIECES 15     /* as VKRT_BINDING_PIECES */
+#define VKRT_SHADE_BINDING_COUNT 16
 
 /* Specialization constant ids: features a render does not use are compiled out instead of
  * branched over (lavapipe pays nearly full price for an `if` that is false everywhere). */
@@ -76,12 +78,15 @@ typedef struct vkrt_float3 { float x, y, z; } vkrt_float3;
 #define VKRT_SPEC_ANYHIT 8 /* 1: stop at the first hit in (tmin, tmax) (shadow and AO rays) */
 #define VKRT_SPEC_TEXTURES 9 /* 1: some material has a texture (albedo mode, alpha test); 0: none
                                 is sampled, the texture code compiled out */
+#define VKRT_SPEC_SPLIT 10 /* 0: the scene's arrays each in one buffer; else log2 of the elements per
+                             piece of a split scene, read through the piece table */
 
 /* Specialization constants of shade.comp: the stage, the mode, and one switch per feature, so
  * a scene pays only for what it uses (vkrt_render_stats.features lists those compiled in). */
 #define VKRT_SPEC_SHADE_STAGE 0
 #define VKRT_SPEC_SHADE_MODE 1
 #define VKRT_SPEC_SHADE_FEATURES 2 /* VKRT_FEATURE_* bits */
+#define VKRT_SPEC_SHADE_SPLIT 3    /* as VKRT_SPEC_SPLIT */
 
 /* Values of the specialization constants; the C side asserts they equal the public enums. */
 #define VKRT_GPU_MODE_NORMAL 1
@@ -206,6 +211,17 @@ typedef struct vkrt_float3 { float x, y, z; } vkrt_float3;
     0xd8800000u, 0x25400000u, 0x59e00000u, 0xe6d00000u, 0x78080000u, 0xb40c0000u, 0x82020000u, 0xc3050000u, \
     0x208f8000u, 0x51474000u, 0xfbea2000u, 0x75d93000u, 0xa0858800u, 0x914e5400u, 0xdbe79e00u, 0x25db6d00u, \
     0x58800080u, 0xe54000c0u, 0x79e00020u, 0xb6d00050u, 0x800800f8u, 0xc00c0074u, 0x200200a2u, 0x50050093u
+
+/* Scenes beyond one storage buffer (VKRT_SPEC_SPLIT != 0): the triangle, node and surface arrays
+ * are cut into pieces of 2^VKRT_SPEC_SPLIT elements, each a buffer of its own that the shaders
+ * reach by its device address. Piece k of array a has its address at entry
+ * VKRT_PIECE_ARRAYS * k + a of the piece table; element i is element i % 2^split of piece
+ * i / 2^split. One shift for all three arrays: the triangles (64 bytes) are the largest of them
+ * and set it, so a node or surface piece is half a triangle piece. */
+#define VKRT_PIECE_TRIS 0
+#define VKRT_PIECE_NODES 1
+#define VKRT_PIECE_SURFACES 2
+#define VKRT_PIECE_ARRAYS 3
 
 /* Miss value written to the id and depth channels. */
 #define VKRT_MISS (-1.0)
@@ -391,6 +407,13 @@ VKRT_STRUCT(vkrt_gpu_accum) {
     float alpha;             /* offset 28; 1 when the primary ray hit */
 };
 
+/* A buffer device address (VkDeviceAddress) as two words, 8 bytes: GLSL makes a buffer
+ * reference of the uvec2 (GL_EXT_buffer_reference_uvec2), so no shader needs 64-bit integers. */
+VKRT_STRUCT(vkrt_gpu_address) {
+    VKRT_UINT lo;          /* offset  0 */
+    VKRT_UINT hi;          /* offset  4 */
+};
+
 /* One saved traversal stack entry, 8 bytes: a pushed node and the distance its box starts. */
 VKRT_STRUCT(vkrt_gpu_stack_entry) {
     VKRT_UINT node;        /* offset  0 */
@@ -450,6 +473,8 @@ _Static_assert(offsetof(vkrt_gpu_ray, dir) == 16, "vkrt_gpu_ray.dir must match s
 _Static_assert(sizeof(vkrt_gpu_resume) == 64, "vkrt_gpu_resume must match std430");
 _Static_assert(offsetof(vkrt_gpu_resume, t) == 20, "vkrt_gpu_resume.t must match std430");
 _Static_assert(offsetof(vkrt_gpu_resume, heat_tris) == 48, "vkrt_gpu_resume.heat_tris must match std430");
+_Static_assert(sizeof(vkrt_gpu_address) == 8, "vkrt_gpu_address must match std430");
+_Static_assert(offsetof(vkrt_gpu_address, hi) == 4, "vkrt_gpu_address.hi must match std430");
 _Static_assert(sizeof(vkrt_gpu_stack_entry) == 8, "vkrt_gpu_stack_entry must match std430");
 _Static_assert(offsetof(vkrt_gpu_stack_entry, tnear) == 4, "vkrt_gpu_stack_entry.tnear must match std430");
 _Static_assert(VKRT_NAIVE_CHUNK_TRIS <= VKRT_LAVAPIPE_BUDGET, "a naive chunk's loop must fit lavapipe's loop limit");

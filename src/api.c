@@ -230,6 +230,8 @@ vkrt_result vkrt_scene_create(vkrt_context *ctx, const vkrt_scene_desc *desc, vk
     vkrt_scene_desc d = desc ? *desc : (vkrt_scene_desc){ 0 };
     if (d.builder > VKRT_BVH_BUILDER_BINNED_SAH)
         return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "vkrt_scene_desc.builder has no valid value (%d)", (int)d.builder);
+    /* A lost device refuses at once, before any loading. */
+    if (ctx->vk && vk_check_lost(ctx->vk) != VKRT_OK) return VKRT_ERROR_DEVICE_LOST;
 
     mesh m = { 0 };
     vkrt_result r = VKRT_ERROR_OUT_OF_MEMORY;
@@ -325,6 +327,8 @@ vkrt_result vkrt_scene_stats_get(const vkrt_scene *scene, vkrt_scene_stats *out_
 {
     if (!scene || !out_stats) return VKRT_ERROR_INVALID_ARGUMENT;
     *out_stats = scene->stats;
+    /* Read now: the surfaces may have reached the device since the scene was made. */
+    if (scene->ctx->vk) gpu_scene_usage(&scene->gpu, &out_stats->device_bytes, &out_stats->device_buffers);
     return VKRT_OK;
 }
 
@@ -491,6 +495,8 @@ static vkrt_result render_lighting(vkrt_context *ctx, vkrt_scene *scene, const v
         out_stats->samples = counts.samples;
         out_stats->shadow_rays = counts.shadow_rays;
         out_stats->bounce_rays = counts.bounce_rays;
+        out_stats->submissions = counts.submissions;
+        out_stats->longest_submission_ms = counts.longest_submission_ms;
     }
     light_table_destroy(c, &table);
     return r;
@@ -506,6 +512,7 @@ vkrt_result vkrt_render(vkrt_context *ctx, vkrt_scene *scene, const vkrt_render_
     if (!scene) return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "scene is NULL");
     if (scene->ctx != ctx) return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "the scene belongs to another context");
     if (!out_rgba) return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "out_rgba is NULL");
+    if (ctx->vk && vk_check_lost(ctx->vk) != VKRT_OK) return VKRT_ERROR_DEVICE_LOST;
     vkrt_render_desc d = desc ? *desc : (vkrt_render_desc){ 0 };
     if (!d.width) d.width = DEFAULT_IMAGE_SIZE;
     if (!d.height) d.height = DEFAULT_IMAGE_SIZE;
@@ -573,6 +580,8 @@ vkrt_result vkrt_render(vkrt_context *ctx, vkrt_scene *scene, const vkrt_render_
         out_stats->leaves_visited = counts.leaves;
         out_stats->tris_tested = counts.tris;
         out_stats->naive_by_cost = naive_by_cost;
+        out_stats->submissions = counts.submissions;
+        out_stats->longest_submission_ms = counts.longest_submission_ms;
     }
     return r;
 }
@@ -589,6 +598,7 @@ vkrt_result vkrt_trace_rays(vkrt_context *ctx, vkrt_scene *scene, const vkrt_tra
     if (scene->ctx != ctx) return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "the scene belongs to another context");
     if (count && !rays) return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "rays is NULL");
     if (count && !out_hits) return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "out_hits is NULL");
+    if (ctx->vk && vk_check_lost(ctx->vk) != VKRT_OK) return VKRT_ERROR_DEVICE_LOST;
     vkrt_trace_desc d = desc ? *desc : (vkrt_trace_desc){ 0 };
     if (d.traversal > VKRT_TRAVERSAL_NAIVE)
         return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "vkrt_trace_desc.traversal has no valid value (%d)", (int)d.traversal);

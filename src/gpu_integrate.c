@@ -5,8 +5,9 @@
 
 #include "vk_pipeline.h"
 
-/* A tile's pixels are the wavefront: 256x256 fills the traversal's continuation buffers
- * (VKRT_RESUME_RAY_CHUNK slots) exactly. */
+/* A tile bounds the wavefront's buffers: 256x256 pixels fill the traversal's continuation
+ * buffers (VKRT_RESUME_RAY_CHUNK slots) exactly. Each rectangle of a tile the pacer sizes is
+ * one wavefront, through all its samples. */
 #define WAVE_TILE 256u
 _Static_assert(WAVE_TILE * WAVE_TILE <= VKRT_RESUME_RAY_CHUNK, "a wavefront tile must fit the continuation buffers");
 
@@ -29,6 +30,9 @@ typedef struct wave {
     VkDescriptorSetLayout set_layout;
     VkPipelineLayout layout;
     double device_ms;
+    gpu_pacer pacer;        /* sizes the rectangles (and naive traversal's passes) */
+    uint32_t chunks;        /* naive-traversal chunks every ray meets (1 for BVH traversal) */
+    gpu_wave_progress progress;
 } wave;
 
 static vkrt_result create_descriptor_set(wave *w)
@@ -53,8 +57,8 @@ static vkrt_result create_descriptor_set(wave *w)
     if (res != VK_SUCCESS) return vk_fail(vk, res, "vkAllocateDescriptorSets (shade)");
     const gpu_scene *s = w->scene;
     const VkBuffer buffers[VKRT_SHADE_BINDING_COUNT] = {
-        [VKRT_SHADE_BINDING_TRIS] = s->tris.buffer,
-        [VKRT_SHADE_BINDING_SURFACES] = s->surfaces.buffer,
+        [VKRT_SHADE_BINDING_TRIS] = s->tris.pieces[0].buffer,
+        [VKRT_SHADE_BINDING_SURFACES] = s->surfaces.pieces[0].buffer,
         [VKRT_SHADE_BINDING_MATERIALS] = s->materials.buffer,
         [VKRT_SHADE_BINDING_TEXTURES] = s->textures.buffer,
         [VKRT_SHADE_BINDING_TEXELS] = s->texels.buffer,
@@ -68,6 +72,7 @@ static vkrt_result create_descriptor_set(wave *w)
         [VKRT_SHADE_BINDING_ACTIVE] = w->counters.buffer,
         [VKRT_SHADE_BINDING_LIGHTING] = w->lighting.buffer,
         [VKRT_SHADE_BINDING_QUEUE] = w->queue.buffer,
+        [VKRT_SHADE_BINDING_PIECES] = s->pieces.buffer,
     };
     VkDescriptorBufferInfo infos[VKRT_SHADE_BINDING_COUNT];
     VkWriteDescriptorSet writes[VKRT_SHADE_BINDING_COUNT];
@@ -104,7 +109,8 @@ static vkrt_result wave_create(wave *w, uint32_t slots)
     w->shadow = gpu_wavefront_tracer_alloc(vk);
     if (!w->closest || !w->shadow) return core_fail(vk->core, VKRT_ERROR_OUT_OF_MEMORY, "out of memory for the wavefront");
     vk_trace_pipeline any;
-    vkrt_result r = vk_shade_pipeline_get(vk, (vk_shade_variant){ VKRT_STAGE_CAMERA, p->mode, p->features }, &any);
+    vkrt_result r = vk_shade_pipeline_get(
+        vk, (vk_shade_variant){ VKRT_STAGE_CAMERA, p->mode, p->features, w->scene->split_shift }, &any);
     gpu_trace_rays_params trace = { .traversal = p->traversal, .intersector = p->intersector,
                                     .alpha_tested = p->alpha_tested, .textured = p->textured };
     if (r == VKRT_OK) r = gpu_wavefront_tracer_init(vk, w->closest, w->scene, &trace, slots);
@@ -181,7 +187,8 @@ static vkrt_result batch_begin(wave *w, stage_batch *b, bool count_active, bool 
 static vkrt_result batch_stage(wave *w, stage_batch *b, uint32_t stage, vkrt_gpu_push push, uint32_t arg)
 {
     vk_trace_pipeline pipe;
-    vkrt_result r = vk_shade_pipeline_get(w->vk, (vk_shade_variant){ stage, w->params->mode, w->params->features }, &pipe);
+    vkrt_result r = vk_shade_pipeline_get(
+        w->vk, (vk_shade_variant){ stage, w->params->mode, w->params->features, w->scene->split_shift }, &pipe);
     if (r != VKRT_OK) return r;
     record_full_barrier(b->cmd);
     push.stage_arg = arg;
@@ -196,11 +203,19 @@ static vkrt_result batch_stage(wave *w, stage_batch *b, uint32_t stage, vkrt_gpu
     return VKRT_OK;
 }
 
-/* Submits and waits; *out (may be NULL) gets the counters the batch's stages made. */
-static vkrt_result batch_submit(wave *w, stage_batch *b, wave_counters *out)
+/* Submits and waits; *out (may be NULL) gets the counters the batch's stages made. The pacer
+ * learns the time: a stage's cost is its pixels', whatever the traversal's chunks. */
+static vkrt_result batch_submit(wave *w, stage_batch *b, vkrt_gpu_push push, wave_counters *out)
 {
     record_full_barrier(b->cmd);
+    const double t0 = core_now_ms();
     vkrt_result r = vk_commands_submit_wait(w->vk, b->cmd);
+    if (r == VKRT_OK)
+        gpu_pacer_report(&w->pacer, (uint64_t)push.tile_width * push.tile_height * w->chunks, core_now_ms() - t0);
+    /* Progress and cancellation between every two submissions. */
+    const gpu_wave_progress *p = &w->progress;
+    if (r == VKRT_OK && p->progress && !p->progress(p->user, "trace", p->fraction))
+        r = core_fail(w->vk->core, VKRT_ERROR_CANCELLED, "render cancelled by the progress callback");
     if (r == VKRT_OK && out) {
         r = vk_buffer_invalidate(w->vk, &w->counters);
         if (r == VKRT_OK) *out = *(const wave_counters *)w->counters.mapped;
@@ -217,7 +232,7 @@ static vkrt_result run_stage(wave *w, uint32_t stage, vkrt_gpu_push push, uint32
         vkFreeCommandBuffers(w->vk->device, w->vk->command_pool, 1, &b.cmd);
         return r;
     }
-    return r == VKRT_OK ? batch_submit(w, &b, NULL) : r;
+    return r == VKRT_OK ? batch_submit(w, &b, push, NULL) : r;
 }
 
 /* Records stages[0 .. count) into one batch and submits it. */
@@ -231,7 +246,7 @@ static vkrt_result run_stages(wave *w, const uint32_t *stages, const uint32_t *a
         if (b.cmd) vkFreeCommandBuffers(w->vk->device, w->vk->command_pool, 1, &b.cmd);
         return r;
     }
-    return batch_submit(w, &b, out);
+    return batch_submit(w, &b, push, out);
 }
 
 /* The push constants of a stage over the queue at offset `in` with `lanes` entries, writing the
@@ -256,13 +271,13 @@ static vkrt_result run_sample(wave *w, vkrt_gpu_push push, bool first, uint32_t 
     *out_started = c.queued;
     if (r != VKRT_OK || c.queued == 0) return r;
     uint32_t lanes = c.queued;
-    if ((r = gpu_wavefront_trace(w->vk, w->closest, w->scene, lanes, &w->device_ms)) != VKRT_OK) return r;
+    if ((r = gpu_wavefront_trace(w->vk, w->closest, w->scene, lanes, &w->pacer, &w->progress, &w->device_ms)) != VKRT_OK) return r;
     if (p->mode == VKRT_MODE_PATH) {
         for (;;) {
             const uint32_t vertex[] = { VKRT_STAGE_VERTEX };
             if ((r = run_stages(w, vertex, zero, 1, queue_push(push, in, out, lanes), true, false, &c)) != VKRT_OK)
                 return r;
-            if ((r = gpu_wavefront_trace(w->vk, w->shadow, w->scene, lanes, &w->device_ms)) != VKRT_OK) return r;
+            if ((r = gpu_wavefront_trace(w->vk, w->shadow, w->scene, lanes, &w->pacer, &w->progress, &w->device_ms)) != VKRT_OK) return r;
             /* Queued paths that ended with a shadow ray are resolved by FINISH: no lane is reused
              * after this pass. */
             if (c.active == 0) break;
@@ -270,7 +285,7 @@ static vkrt_result run_sample(wave *w, vkrt_gpu_push push, bool first, uint32_t 
             uint32_t swap = in;
             in = out;
             out = swap;
-            if ((r = gpu_wavefront_trace(w->vk, w->closest, w->scene, lanes, &w->device_ms)) != VKRT_OK) return r;
+            if ((r = gpu_wavefront_trace(w->vk, w->closest, w->scene, lanes, &w->pacer, &w->progress, &w->device_ms)) != VKRT_OK) return r;
         }
         return run_stage(w, VKRT_STAGE_FINISH, push, 0);
     }
@@ -281,7 +296,7 @@ static vkrt_result run_sample(wave *w, vkrt_gpu_push push, bool first, uint32_t 
     const uint32_t first_stage[] = { shadows ? VKRT_STAGE_HIT_SHADOW : VKRT_STAGE_HIT };
     if ((r = run_stages(w, first_stage, zero, 1, queued, false, false, NULL)) != VKRT_OK) return r;
     for (uint32_t k = 0; k < shadows; k++) {
-        if ((r = gpu_wavefront_trace(w->vk, w->shadow, w->scene, lanes, &w->device_ms)) != VKRT_OK) return r;
+        if ((r = gpu_wavefront_trace(w->vk, w->shadow, w->scene, lanes, &w->pacer, &w->progress, &w->device_ms)) != VKRT_OK) return r;
         r = k + 1 < shadows ? run_stage(w, VKRT_STAGE_SHADOW, queued, k + 1) : VKRT_OK;
         if (r != VKRT_OK) return r;
     }
@@ -319,29 +334,50 @@ vkrt_result gpu_integrate_render(vk_context *vk, const gpu_scene *scene, const g
     const uint32_t width = params->camera.width, height = params->camera.height;
     const uint32_t tile_w = width < WAVE_TILE ? width : WAVE_TILE;
     const uint32_t tile_h = height < WAVE_TILE ? height : WAVE_TILE;
-    wave w = { .vk = vk, .scene = scene, .params = params };
+    const bool naive = params->traversal == VKRT_TRAVERSAL_NAIVE;
+    wave w = { .vk = vk, .scene = scene, .params = params,
+               .chunks = naive ? (scene->tri_count + VKRT_NAIVE_CHUNK_TRIS - 1) / VKRT_NAIVE_CHUNK_TRIS : 1,
+               .progress = { params->progress, params->progress_user, 0.0f } };
+    gpu_wavefront_pacer(vk, scene, naive, tile_w * tile_h, &w.pacer);
     vkrt_result r = wave_create(&w, tile_w * tile_h);
     const uint32_t tiles_x = (width + tile_w - 1) / tile_w, tiles_y = (height + tile_h - 1) / tile_h;
     const uint32_t tiles = tiles_x * tiles_y;
     const uint32_t spp = (params->features & VKRT_GPU_FEATURE_RANDOM) ? params->lighting.spp : 1u;
+    const double pixels = (double)width * height;
+    uint64_t done = 0;
     for (uint32_t t = 0; r == VKRT_OK && t < tiles; t++) {
-        vkrt_gpu_push push = params->camera;
-        push.tile_x = (t % tiles_x) * tile_w;
-        push.tile_y = (t / tiles_x) * tile_h;
-        push.tile_width = width - push.tile_x < tile_w ? width - push.tile_x : tile_w;
-        push.tile_height = height - push.tile_y < tile_h ? height - push.tile_y : tile_h;
-        for (uint32_t s = 0; r == VKRT_OK && s < spp; s++) {
-            float fraction = ((float)t + (float)s / (float)spp) / (float)tiles;
-            if (params->progress && !params->progress(params->progress_user, "trace", fraction)) {
-                r = core_fail(vk->core, VKRT_ERROR_CANCELLED, "render cancelled by the progress callback");
-                break;
+        const uint32_t tx = (t % tiles_x) * tile_w, ty = (t / tiles_x) * tile_h;
+        const uint32_t tw = width - tx < tile_w ? width - tx : tile_w, th = height - ty < tile_h ? height - ty : tile_h;
+        for (uint32_t x = 0, y = 0; r == VKRT_OK && y < th;) {
+            /* The pacer sizes each rectangle from what the last one's submissions took; its
+             * samples all run at that size. */
+            uint32_t rw, rh;
+            gpu_pacer_rect(tw, th, x, y, gpu_pacer_items(&w.pacer, w.chunks), &rw, &rh);
+            vkrt_gpu_push push = params->camera;
+            push.tile_x = tx + x;
+            push.tile_y = ty + y;
+            push.tile_width = rw;
+            push.tile_height = rh;
+            for (uint32_t s = 0; r == VKRT_OK && s < spp; s++) {
+                float fraction = (float)(((double)done + (double)rw * rh * s / spp) / pixels);
+                w.progress.fraction = fraction;
+                if (params->progress && !params->progress(params->progress_user, "trace", fraction)) {
+                    r = core_fail(vk->core, VKRT_ERROR_CANCELLED, "render cancelled by the progress callback");
+                    break;
+                }
+                uint32_t started = 0;
+                r = run_sample(&w, push, s == 0, &started);
+                if (started == 0) break;
             }
-            uint32_t started = 0;
-            r = run_sample(&w, push, s == 0, &started);
-            if (started == 0) break;
+            if (r == VKRT_OK) r = vk_buffer_invalidate(vk, &w.accum);
+            if (r == VKRT_OK) read_tile(&w, push, out_rgba, out_counts);
+            done += (uint64_t)rw * rh;
+            x += rw;
+            if (x == tw) {
+                x = 0;
+                y += rh;
+            }
         }
-        if (r == VKRT_OK) r = vk_buffer_invalidate(vk, &w.accum);
-        if (r == VKRT_OK) read_tile(&w, push, out_rgba, out_counts);
     }
     if (r == VKRT_OK && (r = vk_buffer_invalidate(vk, &w.counters)) == VKRT_OK) {
         const wave_counters *c = w.counters.mapped;
@@ -350,6 +386,8 @@ vkrt_result gpu_integrate_render(vk_context *vk, const gpu_scene *scene, const g
     }
     if (r == VKRT_OK && params->progress) params->progress(params->progress_user, "trace", 1.0f);
     *out_device_ms = w.device_ms;
+    out_counts->submissions = w.pacer.submissions;
+    out_counts->longest_submission_ms = w.pacer.longest_ms;
     wave_destroy(&w);
     return r;
 }

@@ -1,12 +1,15 @@
 #include "gpu_trace.h"
 
+#include <assert.h>
 #include <math.h>
+#include <stdio.h>
 #include <string.h>
 
+#include "gpu_pace.h"
 #include "vk_pipeline.h"
 
-/* Tiles bound the size of the storage image, the hit buffer and one submission; 256x256
- * keeps a naive-traversal chunk well under a second on lavapipe. */
+/* Tiles bound the size of the storage image and of the hit and continuation buffers; the
+ * submissions within a tile are rectangles the pacer sizes (gpu_pace.h). */
 #define TILE_SIZE 256u
 
 /* With a loop budget every pixel of a tile and every ray of a chunk has a continuation slot;
@@ -26,25 +29,120 @@ static vkrt_result check_range(vk_context *vk, VkDeviceSize bytes, const char *w
     return VKRT_OK;
 }
 
+/* The most bytes one buffer of the scene's arrays may hold: what a descriptor can bind (the
+ * first piece of each array is bound as an ordinary storage buffer), what one allocation may
+ * be, and the test knob, whichever is least. */
+static VkDeviceSize piece_limit(const vk_context *vk)
+{
+    VkDeviceSize limit = vk->properties.limits.maxStorageBufferRange;
+    if (vk->max_allocation && vk->max_allocation < limit) limit = vk->max_allocation;
+    if (vk->scene_buffer_limit && vk->scene_buffer_limit < limit) limit = vk->scene_buffer_limit;
+    /* Two triangles at least, so a split scene's pieces hold 2^1 elements or more. */
+    return limit < 2 * sizeof(vkrt_gpu_tri) ? 2 * sizeof(vkrt_gpu_tri) : limit;
+}
+
+static void gpu_array_destroy(vk_context *vk, gpu_array *a)
+{
+    for (uint32_t i = 0; i < a->count; i++) vk_buffer_destroy(vk, &a->pieces[i]);
+    core_free(vk->core, a->pieces);
+    a->pieces = NULL;
+    a->count = 0;
+}
+
+/* `count` elements of `elem_size` bytes into one buffer (shift 0), or into pieces of
+ * 2^shift elements each. */
+static vkrt_result gpu_array_upload(vk_context *vk, const void *data, uint64_t count, size_t elem_size, uint32_t shift,
+                                    const char *label, gpu_array *out)
+{
+    const uint64_t per_piece = shift ? (uint64_t)1 << shift : (count ? count : 1);
+    const uint64_t pieces = count ? (count + per_piece - 1) / per_piece : 1;
+    out->pieces = core_calloc_array(vk->core, (size_t)pieces, sizeof *out->pieces);
+    if (!out->pieces)
+        return core_fail(vk->core, VKRT_ERROR_OUT_OF_MEMORY, "out of memory for the %llu buffers of the scene's %s",
+                         (unsigned long long)pieces, label);
+    out->count = (uint32_t)pieces;
+    VkBufferUsageFlags usage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT;
+    if (shift) usage |= VK_BUFFER_USAGE_SHADER_DEVICE_ADDRESS_BIT;
+    vkrt_result r = VKRT_OK;
+    for (uint64_t k = 0; k < pieces && r == VKRT_OK; k++) {
+        const uint64_t first = k * per_piece;
+        const uint64_t n = count - first < per_piece ? count - first : per_piece;
+        char name[64];
+        if (shift) snprintf(name, sizeof name, "vkrt %s (piece %llu)", label, (unsigned long long)k);
+        else snprintf(name, sizeof name, "vkrt %s", label);
+        r = vk_buffer_create(vk, n * elem_size, usage, VK_MEMORY_DEVICE, name, &out->pieces[k]);
+        if (r == VKRT_OK) r = vk_buffer_upload(vk, &out->pieces[k], (const char *)data + first * elem_size, n * elem_size);
+    }
+    return r;
+}
+
+/* Fills the piece table of a split scene with the address of every piece (the surfaces'
+ * entries stay zero until they are uploaded: no pipeline reads them before). */
+static vkrt_result write_piece_table(vk_context *vk, gpu_scene *s)
+{
+    if (!s->split_shift) return VKRT_OK;
+    const size_t entries = (size_t)s->pieces.size / sizeof(vkrt_gpu_address);
+    vkrt_gpu_address *table = core_calloc_array(vk->core, entries, sizeof *table);
+    if (!table) return core_fail(vk->core, VKRT_ERROR_OUT_OF_MEMORY, "out of memory for the scene's piece table");
+    const gpu_array *arrays[VKRT_PIECE_ARRAYS] = {
+        [VKRT_PIECE_TRIS] = &s->tris, [VKRT_PIECE_NODES] = &s->nodes, [VKRT_PIECE_SURFACES] = &s->surfaces };
+    for (uint32_t a = 0; a < VKRT_PIECE_ARRAYS; a++) {
+        if (a == VKRT_PIECE_SURFACES && !s->surfaces_uploaded) continue;
+        for (uint32_t k = 0; k < arrays[a]->count; k++) {
+            VkDeviceAddress address = vk_buffer_address(vk, &arrays[a]->pieces[k]);
+            table[(size_t)VKRT_PIECE_ARRAYS * k + a] = (vkrt_gpu_address){ (uint32_t)address, (uint32_t)(address >> 32) };
+        }
+    }
+    vkrt_result r = vk_buffer_upload(vk, &s->pieces, table, s->pieces.size);
+    core_free(vk->core, table);
+    return r;
+}
+
 vkrt_result gpu_scene_upload(vk_context *vk, const vkrt_gpu_node *nodes, uint32_t node_count,
                              const vkrt_gpu_tri *tris, uint32_t tri_count, gpu_scene *out)
 {
     memset(out, 0, sizeof *out);
-    VkDeviceSize node_bytes = (VkDeviceSize)node_count * sizeof *nodes;
-    VkDeviceSize tri_bytes = (VkDeviceSize)tri_count * sizeof *tris;
-    vkrt_result r;
-    if ((r = check_range(vk, node_bytes, "BVH nodes")) != VKRT_OK) return r;
-    if ((r = check_range(vk, tri_bytes, "triangles")) != VKRT_OK) return r;
+    const VkDeviceSize limit = piece_limit(vk);
+    const VkDeviceSize node_bytes = (VkDeviceSize)node_count * sizeof *nodes;
+    const VkDeviceSize tri_bytes = (VkDeviceSize)tri_count * sizeof *tris;
+    vkrt_result r = VKRT_OK;
+    /* The triangles are the largest array (at most 2T - 1 nodes of 32 bytes are fewer bytes than
+     * T triangles of 64) and set the one shift of every array: a piece holds as many triangles
+     * as fit the limit, rounded down to a power of two. */
+    assert(node_bytes <= tri_bytes);
+    if (tri_bytes > limit) {
+        if (!vk->buffer_address)
+            return core_fail(vk->core, VKRT_ERROR_LIMIT,
+                             "the scene's triangles need %llu bytes, more than one buffer of this device may hold "
+                             "(%llu bytes), and the device lacks bufferDeviceAddress to split them across buffers",
+                             (unsigned long long)tri_bytes, (unsigned long long)limit);
+        uint32_t shift = 1;
+        while (((VkDeviceSize)2 << shift) * sizeof *tris <= limit && shift < 31) shift++;
+        out->split_shift = shift;
+    }
+    if ((r = gpu_array_upload(vk, nodes, node_count, sizeof *nodes, out->split_shift, "BVH nodes", &out->nodes)) != VKRT_OK)
+        goto fail;
+    if ((r = gpu_array_upload(vk, tris, tri_count, sizeof *tris, out->split_shift, "triangles", &out->tris)) != VKRT_OK)
+        goto fail;
     VkBufferUsageFlags usage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT;
-    if ((r = vk_buffer_create(vk, node_bytes, usage, VK_MEMORY_DEVICE, "vkrt BVH nodes", &out->nodes)) != VKRT_OK) goto fail;
-    if ((r = vk_buffer_create(vk, tri_bytes, usage, VK_MEMORY_DEVICE, "vkrt triangles", &out->tris)) != VKRT_OK) goto fail;
-    if ((r = vk_buffer_upload(vk, &out->nodes, nodes, node_bytes)) != VKRT_OK) goto fail;
-    if ((r = vk_buffer_upload(vk, &out->tris, tris, tri_bytes)) != VKRT_OK) goto fail;
+    /* The table has room for the surfaces, whose pieces are as many as the triangles'. */
+    const uint32_t most = out->tris.count > out->nodes.count ? out->tris.count : out->nodes.count;
+    const VkDeviceSize table_bytes =
+        (VkDeviceSize)(out->split_shift ? VKRT_PIECE_ARRAYS * most : 1) * sizeof(vkrt_gpu_address);
+    if ((r = vk_buffer_create(vk, table_bytes, usage, VK_MEMORY_DEVICE, "vkrt piece table", &out->pieces)) != VKRT_OK)
+        goto fail;
+    const vkrt_gpu_address none = { 0, 0 };
+    if (!out->split_shift && (r = vk_buffer_upload(vk, &out->pieces, &none, sizeof none)) != VKRT_OK) goto fail;
+    if ((r = write_piece_table(vk, out)) != VKRT_OK) goto fail;
     /* Every binding needs a buffer; these stand in until a mode reads surfaces. */
-    vk_buffer *placeholders[4] = { &out->surfaces, &out->materials, &out->textures, &out->texels };
-    const VkDeviceSize placeholder_bytes[4] = { sizeof(vkrt_gpu_surface), sizeof(vkrt_gpu_material),
-                                                sizeof(vkrt_gpu_texture), 2 * sizeof(uint32_t) };
-    for (int i = 0; i < 4; i++)
+    const vkrt_gpu_surface no_surface = { 0 };
+    if ((r = gpu_array_upload(vk, &no_surface, 1, sizeof no_surface, 0, "surfaces (placeholder)", &out->surfaces)) !=
+        VKRT_OK)
+        goto fail;
+    vk_buffer *placeholders[3] = { &out->materials, &out->textures, &out->texels };
+    const VkDeviceSize placeholder_bytes[3] = { sizeof(vkrt_gpu_material), sizeof(vkrt_gpu_texture),
+                                                2 * sizeof(uint32_t) };
+    for (int i = 0; i < 3; i++)
         if ((r = vk_buffer_create(vk, placeholder_bytes[i], usage, VK_MEMORY_DEVICE, "vkrt surfaces (placeholder)",
                                   placeholders[i])) != VKRT_OK)
             goto fail;
@@ -58,12 +156,23 @@ fail:
 
 void gpu_scene_destroy(vk_context *vk, gpu_scene *s)
 {
-    vk_buffer_destroy(vk, &s->nodes);
-    vk_buffer_destroy(vk, &s->tris);
-    vk_buffer_destroy(vk, &s->surfaces);
+    gpu_array_destroy(vk, &s->nodes);
+    gpu_array_destroy(vk, &s->tris);
+    gpu_array_destroy(vk, &s->surfaces);
     vk_buffer_destroy(vk, &s->materials);
     vk_buffer_destroy(vk, &s->textures);
     vk_buffer_destroy(vk, &s->texels);
+    vk_buffer_destroy(vk, &s->pieces);
+}
+
+void gpu_scene_usage(const gpu_scene *s, uint64_t *out_bytes, uint32_t *out_buffers)
+{
+    uint64_t bytes = s->materials.allocated + s->textures.allocated + s->texels.allocated + s->pieces.allocated;
+    const gpu_array *arrays[3] = { &s->nodes, &s->tris, &s->surfaces };
+    for (int a = 0; a < 3; a++)
+        for (uint32_t k = 0; k < arrays[a]->count; k++) bytes += arrays[a]->pieces[k].allocated;
+    *out_bytes = bytes;
+    *out_buffers = s->nodes.count + s->tris.count;
 }
 
 vkrt_result gpu_scene_upload_surfaces(vk_context *vk, gpu_scene *s, const gpu_surface_data *d)
@@ -76,14 +185,18 @@ vkrt_result gpu_scene_upload_surfaces(vk_context *vk, gpu_scene *s, const gpu_su
         const char *name;
         vk_buffer fresh;
     } parts[] = {
-        { &s->surfaces, d->surfaces, (VkDeviceSize)s->tri_count * sizeof *d->surfaces, "surfaces", { 0 } },
         { &s->materials, d->materials, (VkDeviceSize)d->material_count * sizeof *d->materials, "materials", { 0 } },
         { &s->textures, d->textures, (VkDeviceSize)d->texture_count * sizeof *d->textures, "textures", { 0 } },
         { &s->texels, d->texels, (VkDeviceSize)d->texel_count * 2 * sizeof *d->texels, "texels", { 0 } },
     };
     enum { PARTS = sizeof parts / sizeof parts[0] };
     VkBufferUsageFlags usage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT;
+    /* The surfaces, one per triangle, split as the triangles are (and so within the limit). */
+    gpu_array surfaces = { 0 };
     vkrt_result r = VKRT_OK;
+    if (!s->split_shift) r = check_range(vk, (VkDeviceSize)s->tri_count * sizeof *d->surfaces, "surfaces");
+    if (r == VKRT_OK)
+        r = gpu_array_upload(vk, d->surfaces, s->tri_count, sizeof *d->surfaces, s->split_shift, "surfaces", &surfaces);
     for (int i = 0; i < PARTS && r == VKRT_OK; i++) {
         r = check_range(vk, parts[i].bytes, parts[i].name);
         if (r == VKRT_OK) r = vk_buffer_create(vk, parts[i].bytes, usage, VK_MEMORY_DEVICE, parts[i].name, &parts[i].fresh);
@@ -94,7 +207,13 @@ vkrt_result gpu_scene_upload_surfaces(vk_context *vk, gpu_scene *s, const gpu_su
         vk_buffer_destroy(vk, keep);
         if (r == VKRT_OK) *parts[i].target = parts[i].fresh;
     }
-    s->surfaces_uploaded = r == VKRT_OK;
+    gpu_array_destroy(vk, r == VKRT_OK ? &s->surfaces : &surfaces);
+    if (r != VKRT_OK) return r;
+    s->surfaces = surfaces;
+    s->surfaces_uploaded = true;
+    /* Without their table entries a split scene's surfaces cannot be read: the next render
+     * that needs them uploads them again (replacing these). */
+    if ((r = write_piece_table(vk, s)) != VKRT_OK) s->surfaces_uploaded = false;
     return r;
 }
 
@@ -105,6 +224,7 @@ vkrt_result gpu_scene_upload_surfaces(vk_context *vk, gpu_scene *s, const gpu_su
 typedef struct render_objects {
     VkImage image;
     VkDeviceMemory image_memory;
+    VkMemoryAllocateInfo image_allocation; /* its size and type */
     VkImageView view;
     vk_buffer readback;
     vk_buffer hits;
@@ -124,7 +244,7 @@ static void render_objects_destroy(vk_context *vk, render_objects *o)
     if (o->pool) vkDestroyDescriptorPool(vk->device, o->pool, NULL);
     if (o->view) vkDestroyImageView(vk->device, o->view, NULL);
     if (o->image) vkDestroyImage(vk->device, o->image, NULL);
-    if (o->image_memory) vkFreeMemory(vk->device, o->image_memory, NULL);
+    vk_memory_free(vk, o->image_memory, &o->image_allocation);
     vk_buffer_destroy(vk, &o->readback);
     vk_buffer_destroy(vk, &o->hits);
     vk_buffer_destroy(vk, &o->rays);
@@ -166,8 +286,9 @@ static vkrt_result create_image(vk_context *vk, uint32_t w, uint32_t h, render_o
         .allocationSize = req.size,
         .memoryTypeIndex = (uint32_t)type,
     };
-    res = vkAllocateMemory(vk->device, &alloc, NULL, &o->image_memory);
-    if (res != VK_SUCCESS) return vk_fail(vk, res, "vkAllocateMemory (tile image)");
+    vkrt_result r = vk_memory_allocate(vk, &alloc, "the tile image", &o->image_memory);
+    if (r != VKRT_OK) return r;
+    o->image_allocation = alloc;
     res = vkBindImageMemory(vk->device, o->image, o->image_memory, 0);
     if (res != VK_SUCCESS) return vk_fail(vk, res, "vkBindImageMemory");
     VkImageViewCreateInfo view = {
@@ -210,12 +331,13 @@ static vkrt_result create_descriptors(vk_context *vk, const gpu_scene *scene, Vk
         uint32_t binding;
         VkBuffer buffer;
     } buffers[] = {
-        { VKRT_BINDING_NODES, scene->nodes.buffer },   { VKRT_BINDING_TRIS, scene->tris.buffer },
+        { VKRT_BINDING_NODES, scene->nodes.pieces[0].buffer },   { VKRT_BINDING_TRIS, scene->tris.pieces[0].buffer },
         { VKRT_BINDING_HITS, o->hits.buffer },         { VKRT_BINDING_RAYS, o->rays.buffer },
         { VKRT_BINDING_RESUME, o->resume.buffer },     { VKRT_BINDING_RESUME_STACK, o->resume_stack.buffer },
         { VKRT_BINDING_UNFINISHED, o->unfinished.buffer },    { VKRT_BINDING_COUNTERS, o->counters.buffer },
-        { VKRT_BINDING_SURFACES, scene->surfaces.buffer },    { VKRT_BINDING_MATERIALS, scene->materials.buffer },
+        { VKRT_BINDING_SURFACES, scene->surfaces.pieces[0].buffer }, { VKRT_BINDING_MATERIALS, scene->materials.buffer },
         { VKRT_BINDING_TEXTURES, scene->textures.buffer },    { VKRT_BINDING_TEXELS, scene->texels.buffer },
+        { VKRT_BINDING_PIECES, scene->pieces.buffer },
     };
     enum { BUFFERS = sizeof buffers / sizeof buffers[0] };
     _Static_assert(BUFFERS == VKRT_BINDING_COUNT - 1, "every binding but the image has a buffer here");
@@ -335,27 +457,39 @@ static void record_buffer_barrier(VkCommandBuffer cmd, VkBuffer buffer, VkPipeli
     vkCmdPipelineBarrier(cmd, src_stage, dst_stage, 0, 0, NULL, 1, &b, 0, NULL);
 }
 
-/* Naive traversal: the hit buffer cleared, then one dispatch per chunk of
- * VKRT_NAIVE_CHUNK_TRIS triangles, each reading the closest hits the one before wrote. */
+/* What one submission over a tile's rectangle or a chunk of rays records. */
+typedef struct pass_range {
+    bool again;          /* a later pass over the same pixels or rays: the image keeps what the
+                            earlier ones wrote */
+    uint32_t tri_first;  /* naive traversal: the pass's triangles [tri_first, tri_end), whole */
+    uint32_t tri_end;    /* chunks of VKRT_NAIVE_CHUNK_TRIS (the last one shorter) */
+} pass_range;
+
+/* Naive traversal: one dispatch per chunk of VKRT_NAIVE_CHUNK_TRIS triangles of the pass's
+ * range, each reading the closest hits the one before wrote; the range starting at triangle 0
+ * clears the hit buffer first. */
 static void record_naive_chunks(VkCommandBuffer cmd, const vk_trace_pipeline *pipe, const render_objects *o,
-                                const gpu_scene *scene, vkrt_gpu_push push, uint32_t groups_x, uint32_t groups_y)
+                                const gpu_scene *scene, vkrt_gpu_push push, pass_range range, uint32_t groups_x,
+                                uint32_t groups_y)
 {
-    /* t = +inf (0x7f800000) and no triangle (0xffffffff) would need two fills; a fill of
-     * the whole record with 0x7f800000 gives t = +inf, and the shader treats any hit with
-     * t = +inf as none, so one fill suffices. */
-    vkCmdFillBuffer(cmd, o->hits.buffer, 0, VK_WHOLE_SIZE, 0x7f800000u);
-    /* The first chunk reads the cleared hits. */
-    record_buffer_barrier(cmd, o->hits.buffer, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_WRITE_BIT,
-                          VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT);
-    for (uint32_t first = 0; first < scene->tri_count; first += VKRT_NAIVE_CHUNK_TRIS) {
+    if (range.tri_first == 0) {
+        /* t = +inf (0x7f800000) and no triangle (0xffffffff) would need two fills; a fill of
+         * the whole record with 0x7f800000 gives t = +inf, and the shader treats any hit with
+         * t = +inf as none, so one fill suffices. */
+        vkCmdFillBuffer(cmd, o->hits.buffer, 0, VK_WHOLE_SIZE, 0x7f800000u);
+        /* The first chunk reads the cleared hits. */
+        record_buffer_barrier(cmd, o->hits.buffer, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_WRITE_BIT,
+                              VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
+                              VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT);
+    }
+    for (uint32_t first = range.tri_first; first < range.tri_end; first += VKRT_NAIVE_CHUNK_TRIS) {
         push.tri_first = first;
         push.tri_end = scene->tri_count - first > VKRT_NAIVE_CHUNK_TRIS ? first + VKRT_NAIVE_CHUNK_TRIS
                                                                         : scene->tri_count;
         push.last_chunk = push.tri_end == scene->tri_count;
-        vkCmdPushConstants(cmd, pipe->layout, VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof push, &push);
-        vkCmdDispatch(cmd, groups_x, groups_y, 1);
-        if (!push.last_chunk) {
-            /* Each chunk reads the closest hit the previous chunk wrote. */
+        if (first != 0) {
+            /* Each chunk reads the closest hit the previous chunk wrote, in this submission
+             * or the one before. */
             VkMemoryBarrier chunk_done = {
                 .sType = VK_STRUCTURE_TYPE_MEMORY_BARRIER,
                 .srcAccessMask = VK_ACCESS_SHADER_WRITE_BIT,
@@ -364,20 +498,23 @@ static void record_naive_chunks(VkCommandBuffer cmd, const vk_trace_pipeline *pi
             vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 0,
                                  1, &chunk_done, 0, NULL, 0, NULL);
         }
+        vkCmdPushConstants(cmd, pipe->layout, VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof push, &push);
+        vkCmdDispatch(cmd, groups_x, groups_y, 1);
     }
 }
 
-/* The image to GENERAL for the shader's writes. A tile's first pass discards the previous
- * contents (an earlier tile, already copied out); a resume pass keeps the pixels finished so
- * far. Returns the barrier for the transition back. */
+/* The image to GENERAL for the shader's writes. The first use of the image waits for
+ * nothing; a rectangle's first pass discards the previous contents (an earlier rectangle,
+ * already copied out); a later pass keeps the pixels written so far. Returns the barrier for
+ * the transition back. */
 static VkImageMemoryBarrier record_image_to_general(VkCommandBuffer cmd, const render_objects *o, bool first,
-                                                    bool resume)
+                                                    bool keep)
 {
     VkImageMemoryBarrier to_general = {
         .sType = VK_STRUCTURE_TYPE_IMAGE_MEMORY_BARRIER,
         .srcAccessMask = first ? 0 : VK_ACCESS_TRANSFER_READ_BIT,
         .dstAccessMask = VK_ACCESS_SHADER_WRITE_BIT,
-        .oldLayout = resume ? VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL : VK_IMAGE_LAYOUT_UNDEFINED,
+        .oldLayout = keep ? VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL : VK_IMAGE_LAYOUT_UNDEFINED,
         .newLayout = VK_IMAGE_LAYOUT_GENERAL,
         .srcQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED,
         .dstQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED,
@@ -393,8 +530,8 @@ static VkImageMemoryBarrier record_image_to_general(VkCommandBuffer cmd, const r
  * loop budget (BVH traversal on lavapipe) the unfinished counter is cleared first and handed
  * to the host after. */
 static void record_dispatches(VkCommandBuffer cmd, const vk_trace_pipeline *pipe, const render_objects *o,
-                              const gpu_scene *scene, vkrt_gpu_push push, bool naive, bool budget, uint32_t groups_x,
-                              uint32_t groups_y)
+                              const gpu_scene *scene, vkrt_gpu_push push, bool naive, bool budget, pass_range range,
+                              uint32_t groups_x, uint32_t groups_y)
 {
     if (budget) {
         /* The previous pass (an earlier submission) wrote the continuation state this one
@@ -422,7 +559,7 @@ static void record_dispatches(VkCommandBuffer cmd, const vk_trace_pipeline *pipe
         vkCmdPushConstants(cmd, pipe->layout, VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof push, &push);
         vkCmdDispatch(cmd, groups_x, groups_y, 1);
     } else {
-        record_naive_chunks(cmd, pipe, o, scene, push, groups_x, groups_y);
+        record_naive_chunks(cmd, pipe, o, scene, push, range, groups_x, groups_y);
     }
     if (o->queries) vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, o->queries, 1);
     /* The host reads the counter after the fence. */
@@ -431,13 +568,15 @@ static void record_dispatches(VkCommandBuffer cmd, const vk_trace_pipeline *pipe
                               VK_ACCESS_SHADER_WRITE_BIT, VK_PIPELINE_STAGE_HOST_BIT, VK_ACCESS_HOST_READ_BIT);
 }
 
-/* Records one pass over a tile (its first, or a resume of the traversals the budget stopped):
- * trace dispatch(es), then a copy of the tile image into the readback buffer. */
+/* Records one pass over a rectangle of the image (its first, a resume of the traversals the
+ * budget stopped, or the next naive chunks): trace dispatch(es), then a copy of the
+ * rectangle's pixels into the readback buffer. */
 static void record_tile(VkCommandBuffer cmd, const vk_trace_pipeline *pipe, const render_objects *o,
-                        const gpu_scene *scene, vkrt_gpu_push push, bool naive, bool budget, bool first_tile)
+                        const gpu_scene *scene, vkrt_gpu_push push, bool naive, bool budget, bool first_use,
+                        pass_range range)
 {
-    VkImageMemoryBarrier to_general = record_image_to_general(cmd, o, first_tile && !push.resume, push.resume != 0);
-    record_dispatches(cmd, pipe, o, scene, push, naive, budget, div_up(push.tile_width, VKRT_TRACE_GROUP_X),
+    VkImageMemoryBarrier to_general = record_image_to_general(cmd, o, first_use && !range.again, range.again);
+    record_dispatches(cmd, pipe, o, scene, push, naive, budget, range, div_up(push.tile_width, VKRT_TRACE_GROUP_X),
                       div_up(push.tile_height, VKRT_TRACE_GROUP_Y));
     /* The copy reads what the shader wrote. */
     VkImageMemoryBarrier to_transfer = to_general;
@@ -462,7 +601,7 @@ static void record_tile(VkCommandBuffer cmd, const vk_trace_pipeline *pipe, cons
                           VK_PIPELINE_STAGE_HOST_BIT, VK_ACCESS_HOST_READ_BIT);
 }
 
-/* Adds the counters of a finished tile's pixels to *sum. */
+/* Adds the counters of a finished rectangle's pixels to *sum. */
 static vkrt_result add_tile_counts(vk_context *vk, render_objects *o, uint32_t pixels, trace_counts *sum)
 {
     vkrt_result r = vk_buffer_invalidate(vk, &o->counters);
@@ -494,46 +633,97 @@ static vkrt_result read_unfinished(vk_context *vk, render_objects *o, uint32_t *
 }
 
 static void record_rays(VkCommandBuffer cmd, const vk_trace_pipeline *pipe, const render_objects *o,
-                        const gpu_scene *scene, vkrt_gpu_push push, bool naive, bool budget, bool first_chunk,
-                        bool device_only);
+                        const gpu_scene *scene, vkrt_gpu_push push, bool naive, bool budget, bool first_use,
+                        pass_range range, bool device_only);
 
-/* What one tile or ray chunk is traced with. */
+/* What one rectangle of an image or chunk of rays is traced with. */
 typedef struct pass_desc {
     const vk_trace_pipeline *pipe;
     const gpu_scene *scene;
     bool naive, budget;
-    bool rays;         /* a ray chunk, else an image tile */
+    bool rays;         /* a ray chunk, else a rectangle of the image */
     bool device_only;  /* rays whose hits stay on the device (the wavefront): no readback */
-    bool first;        /* the first tile or chunk of the call */
+    bool first;        /* the first rectangle or chunk of the call */
     const char *what;  /* "render" or "trace", for the cancellation message */
+    gpu_pacer *pacer;  /* sizes the naive passes and learns from every pass */
     vkrt_progress_fn progress;
     void *progress_user;
     float fraction;    /* progress reported between passes */
 } pass_desc;
 
-/* Submits the tile's or chunk's first pass, then resume passes while the loop budget left any
- * traversal unfinished (one pass without a budget), with progress and cancellation between
- * them. Adds the device time to *device_ms (may be NULL); the readback buffer then holds the
- * complete result. */
+/* The submission target of vk (the test knob, or GPU_SUBMIT_TARGET_MS). */
+static double submit_target_ms(const vk_context *vk)
+{
+    return vk->submit_target_ms > 0.0 ? vk->submit_target_ms : GPU_SUBMIT_TARGET_MS;
+}
+
+/* Submits the rectangle's or chunk's first pass, then more while the loop budget left any
+ * traversal unfinished (resume passes) or naive traversal has triangle chunks left (as many
+ * chunks per pass as the pacer allows), with progress and cancellation between them; the
+ * pacer learns each pass's time. Adds the device time to *device_ms (may be NULL); the
+ * readback buffer then holds the complete result. */
 static vkrt_result run_passes(vk_context *vk, render_objects *o, const pass_desc *d, vkrt_gpu_push push,
                               double *device_ms)
 {
+    const uint64_t items = d->rays ? push.tile_width : (uint64_t)push.tile_width * push.tile_height;
+    const uint32_t tri_count = d->scene->tri_count;
+    pass_range range = { .again = false, .tri_first = 0, .tri_end = tri_count };
     push.resume = 0;
     for (;;) {
+        uint64_t chunks = 1;
+        if (d->naive) {
+            chunks = d->pacer->units / items;
+            if (chunks < 1) chunks = 1;
+            const uint64_t end = range.tri_first + chunks * VKRT_NAIVE_CHUNK_TRIS;
+            range.tri_end = end < tri_count ? (uint32_t)end : tri_count;
+            chunks = div_up(range.tri_end - range.tri_first, VKRT_NAIVE_CHUNK_TRIS);
+        }
         VkCommandBuffer cmd;
         vkrt_result r = vk_commands_begin(vk, &cmd);
         if (r != VKRT_OK) return r;
-        if (d->rays) record_rays(cmd, d->pipe, o, d->scene, push, d->naive, d->budget, d->first, d->device_only);
-        else record_tile(cmd, d->pipe, o, d->scene, push, d->naive, d->budget, d->first);
+        if (d->rays) record_rays(cmd, d->pipe, o, d->scene, push, d->naive, d->budget, d->first, range, d->device_only);
+        else record_tile(cmd, d->pipe, o, d->scene, push, d->naive, d->budget, d->first, range);
+        const double t0 = core_now_ms();
         if ((r = vk_commands_submit_wait(vk, cmd)) != VKRT_OK) return r;
+        gpu_pacer_report(d->pacer, items * chunks, core_now_ms() - t0);
         if (device_ms) *device_ms += tile_device_ms(vk, o);
-        uint32_t unfinished = 0;
-        if (d->budget && (r = read_unfinished(vk, o, &unfinished)) != VKRT_OK) return r;
-        if (unfinished == 0) return d->device_only ? VKRT_OK : vk_buffer_invalidate(vk, &o->readback);
-        if (d->progress && !d->progress(d->progress_user, "trace", d->fraction))
+        bool done;
+        if (d->naive) {
+            range.tri_first = range.tri_end;
+            done = range.tri_first == tri_count;
+        } else {
+            uint32_t unfinished = 0;
+            if (d->budget && (r = read_unfinished(vk, o, &unfinished)) != VKRT_OK) return r;
+            done = unfinished == 0;
+            push.resume = 1;
+        }
+        /* Between two submissions; an image rectangle's or ray chunk's caller asks before its
+         * next one. */
+        if ((!done || d->device_only) && d->progress && !d->progress(d->progress_user, "trace", d->fraction))
             return core_fail(vk->core, VKRT_ERROR_CANCELLED, "%s cancelled by the progress callback", d->what);
-        push.resume = 1;
+        if (done) return d->device_only ? VKRT_OK : vk_buffer_invalidate(vk, &o->readback);
+        range.again = true;
     }
+}
+
+static uint32_t naive_chunks(const gpu_scene *scene)
+{
+    return div_up(scene->tri_count, VKRT_NAIVE_CHUNK_TRIS);
+}
+
+/* A pacer for a render or a trace: its units are pixels or rays times naive chunks, from one
+ * 8x8 workgroup up to `items` (a tile or the ray capacity) times every chunk. */
+static void pacer_for(const vk_context *vk, const gpu_scene *scene, bool naive, uint64_t items, gpu_pacer *p)
+{
+    uint64_t max_units = 1;
+    while (max_units < items) max_units *= 2;
+    if (naive)
+        for (uint32_t c = naive_chunks(scene); c > 1; c = (c + 1) / 2) max_units *= 2;
+    /* The start suits the default target; a smaller one starts proportionally smaller. */
+    const double target = submit_target_ms(vk);
+    const double start = (naive ? GPU_PACE_START_NAIVE_UNITS : GPU_PACE_START_UNITS) *
+                         (target < GPU_SUBMIT_TARGET_MS ? target / GPU_SUBMIT_TARGET_MS : 1.0);
+    gpu_pacer_init(p, target, VKRT_TRACE_GROUP_SIZE, max_units, (uint64_t)start, 1);
 }
 
 vkrt_result gpu_trace_render(vk_context *vk, const gpu_scene *scene, const gpu_trace_params *params,
@@ -556,6 +746,7 @@ vkrt_result gpu_trace_render(vk_context *vk, const gpu_scene *scene, const gpu_t
         .alpha = params->alpha_tested,
         /* Only albedo and the alpha test sample textures: other modes share one pipeline. */
         .textures = params->textured && (params->alpha_tested || params->mode == VKRT_MODE_ALBEDO),
+        .split = scene->split_shift,
     };
     /* Only heatmap reads the heat kind: other modes share one pipeline whatever it is. */
     if (variant.mode != VKRT_GPU_MODE_HEATMAP) variant.heat = VKRT_GPU_HEAT_NODES;
@@ -569,50 +760,71 @@ vkrt_result gpu_trace_render(vk_context *vk, const gpu_scene *scene, const gpu_t
     render_objects o;
     r = create_render_objects(vk, scene, pipe.set_layout, tile_w, tile_h, naive ? tile_w * tile_h : 1, 0,
                               budget ? tile_w * tile_h : 0, variant.counters ? tile_w * tile_h : 0, &o);
+    gpu_pacer pacer;
+    pacer_for(vk, scene, naive, (uint64_t)tile_w * tile_h, &pacer);
     const uint32_t tiles_x = div_up(width, tile_w), tiles_y = div_up(height, tile_h);
     const uint32_t tiles = tiles_x * tiles_y;
+    const double pixels = (double)width * height;
+    uint64_t done = 0;
+    bool first = true;
+    /* Tiles bound the buffers; within one, rectangles sized by the pacer bound each
+     * submission's time. */
     for (uint32_t t = 0; r == VKRT_OK && t < tiles; t++) {
-        if (params->progress && !params->progress(params->progress_user, "trace", (float)t / (float)tiles)) {
-            r = core_fail(vk->core, VKRT_ERROR_CANCELLED, "render cancelled by the progress callback");
-            break;
-        }
-        vkrt_gpu_push push = params->camera;
-        push.tile_x = (t % tiles_x) * tile_w;
-        push.tile_y = (t / tiles_x) * tile_h;
-        push.tile_width = width - push.tile_x < tile_w ? width - push.tile_x : tile_w;
-        push.tile_height = height - push.tile_y < tile_h ? height - push.tile_y : tile_h;
-        push.tri_first = 0;
-        push.tri_end = scene->tri_count;
-        push.tri_total = scene->tri_count;
-        push.last_chunk = 1;
-        const pass_desc pass = { .pipe = &pipe, .scene = scene, .naive = naive, .budget = budget, .first = t == 0,
-                                 .what = "render", .progress = params->progress,
-                                 .progress_user = params->progress_user, .fraction = (float)t / (float)tiles };
-        if ((r = run_passes(vk, &o, &pass, push, out_device_ms)) != VKRT_OK) break;
-        if (variant.counters &&
-            (r = add_tile_counts(vk, &o, push.tile_width * push.tile_height, out_counts)) != VKRT_OK)
-            break;
-        const float *src = o.readback.mapped;
-        for (uint32_t y = 0; y < push.tile_height; y++) {
-            float *dst = out_rgba + ((size_t)(push.tile_y + y) * width + push.tile_x) * 4;
-            memcpy(dst, src + (size_t)y * push.tile_width * 4, (size_t)push.tile_width * 4 * sizeof(float));
+        const uint32_t tx = (t % tiles_x) * tile_w, ty = (t / tiles_x) * tile_h;
+        const uint32_t tw = width - tx < tile_w ? width - tx : tile_w, th = height - ty < tile_h ? height - ty : tile_h;
+        for (uint32_t x = 0, y = 0; r == VKRT_OK && y < th;) {
+            const float fraction = (float)((double)done / pixels);
+            if (params->progress && !params->progress(params->progress_user, "trace", fraction)) {
+                r = core_fail(vk->core, VKRT_ERROR_CANCELLED, "render cancelled by the progress callback");
+                break;
+            }
+            uint32_t rw, rh;
+            gpu_pacer_rect(tw, th, x, y, gpu_pacer_items(&pacer, naive ? naive_chunks(scene) : 1), &rw, &rh);
+            vkrt_gpu_push push = params->camera;
+            push.tile_x = tx + x;
+            push.tile_y = ty + y;
+            push.tile_width = rw;
+            push.tile_height = rh;
+            push.tri_first = 0;
+            push.tri_end = scene->tri_count;
+            push.tri_total = scene->tri_count;
+            push.last_chunk = 1;
+            const pass_desc pass = { .pipe = &pipe, .scene = scene, .naive = naive, .budget = budget, .first = first,
+                                     .what = "render", .pacer = &pacer, .progress = params->progress,
+                                     .progress_user = params->progress_user, .fraction = fraction };
+            first = false;
+            if ((r = run_passes(vk, &o, &pass, push, out_device_ms)) != VKRT_OK) break;
+            if (variant.counters && (r = add_tile_counts(vk, &o, rw * rh, out_counts)) != VKRT_OK) break;
+            const float *src = o.readback.mapped;
+            for (uint32_t row = 0; row < rh; row++) {
+                float *dst = out_rgba + ((size_t)(push.tile_y + row) * width + push.tile_x) * 4;
+                memcpy(dst, src + (size_t)row * rw * 4, (size_t)rw * 4 * sizeof(float));
+            }
+            done += (uint64_t)rw * rh;
+            x += rw;
+            if (x == tw) {
+                x = 0;
+                y += rh;
+            }
         }
     }
     if (r == VKRT_OK && params->counters && naive) out_counts->tris = (uint64_t)scene->tri_count * width * height;
+    out_counts->submissions = pacer.submissions;
+    out_counts->longest_submission_ms = pacer.longest_ms;
     if (r == VKRT_OK && params->progress) params->progress(params->progress_user, "trace", 1.0f);
     render_objects_destroy(vk, &o);
     return r;
 }
 
-/* Records one pass over a chunk of rays (its first, or a resume): dispatch(es) over the rays,
- * then a copy of the hits into the readback buffer. */
+/* Records one pass over a chunk of rays (its first, a resume, or the next naive chunks):
+ * dispatch(es) over the rays, then a copy of the hits into the readback buffer. */
 static void record_rays(VkCommandBuffer cmd, const vk_trace_pipeline *pipe, const render_objects *o,
-                        const gpu_scene *scene, vkrt_gpu_push push, bool naive, bool budget, bool first_chunk,
-                        bool device_only)
+                        const gpu_scene *scene, vkrt_gpu_push push, bool naive, bool budget, bool first_use,
+                        pass_range range, bool device_only)
 {
     /* The storage image is never written in ray mode, but its descriptor must be in the layout
      * it names. */
-    if (first_chunk && !push.resume) record_image_to_general(cmd, o, true, false);
+    if (first_use && !range.again) record_image_to_general(cmd, o, true, false);
     /* The shader reads the rays the host, a staging copy or (the wavefront) shade.comp wrote,
      * and overwrites hits that the previous chunk's copy or shade stage read. */
     VkMemoryBarrier inputs = {
@@ -626,7 +838,7 @@ static void record_rays(VkCommandBuffer cmd, const vk_trace_pipeline *pipe, cons
                          0, NULL);
     /* One invocation per ray, 1D over whole workgroups; VKRT_RAY_CHUNK keeps the count of
      * groups far below the 65,535 a dispatch allows. */
-    record_dispatches(cmd, pipe, o, scene, push, naive, budget, div_up(push.tile_width, VKRT_TRACE_GROUP_SIZE), 1);
+    record_dispatches(cmd, pipe, o, scene, push, naive, budget, range, div_up(push.tile_width, VKRT_TRACE_GROUP_SIZE), 1);
     if (device_only) return;
     /* The copy reads the hits the shader wrote. */
     record_buffer_barrier(cmd, o->hits.buffer, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_WRITE_BIT,
@@ -640,7 +852,8 @@ static void record_rays(VkCommandBuffer cmd, const vk_trace_pipeline *pipe, cons
 
 /* The pipeline variant of a ray buffer traced from `raygen` (buffer or wavefront). Mode and heat
  * are unused there: fixed, so every ray call shares one pipeline. */
-static vk_trace_variant ray_variant(const vk_context *vk, const gpu_trace_rays_params *params, uint32_t raygen)
+static vk_trace_variant ray_variant(const vk_context *vk, const gpu_scene *scene, const gpu_trace_rays_params *params,
+                                    uint32_t raygen)
 {
     const bool naive = params->traversal == VKRT_TRAVERSAL_NAIVE;
     return (vk_trace_variant){
@@ -653,6 +866,7 @@ static vk_trace_variant ray_variant(const vk_context *vk, const gpu_trace_rays_p
         .alpha = params->alpha_tested,
         .anyhit = params->any_hit,
         .textures = params->textured && params->alpha_tested,
+        .split = scene->split_shift,
     };
 }
 
@@ -660,32 +874,39 @@ vkrt_result gpu_trace_rays(vk_context *vk, const gpu_scene *scene, const gpu_tra
                            const vkrt_ray *rays, size_t count, vkrt_hit *out_hits)
 {
     const bool naive = params->traversal == VKRT_TRAVERSAL_NAIVE;
-    const vk_trace_variant variant = ray_variant(vk, params, VKRT_GPU_RAYGEN_BUFFER);
+    const vk_trace_variant variant = ray_variant(vk, scene, params, VKRT_GPU_RAYGEN_BUFFER);
     vk_trace_pipeline pipe;
     vkrt_result r = vk_trace_pipeline_get(vk, variant, &pipe);
     if (r != VKRT_OK) return r;
     const bool budget = variant.budget != 0;
     /* With a budget, smaller chunks keep the continuation buffers small. */
     const uint32_t max_chunk = budget ? VKRT_RESUME_RAY_CHUNK : VKRT_RAY_CHUNK;
-    const uint32_t chunk = count < max_chunk ? (uint32_t)count : max_chunk;
+    const uint32_t capacity = count < max_chunk ? (uint32_t)count : max_chunk;
     render_objects o;
-    r = create_render_objects(vk, scene, pipe.set_layout, 1, 1, chunk, chunk, budget ? chunk : 0, 0, &o);
-    const size_t chunks = (count + chunk - 1) / chunk;
-    for (size_t k = 0; r == VKRT_OK && k < chunks; k++) {
-        if (params->progress && !params->progress(params->progress_user, "trace", (float)k / (float)chunks)) {
+    r = create_render_objects(vk, scene, pipe.set_layout, 1, 1, capacity, capacity, budget ? capacity : 0, 0, &o);
+    gpu_pacer pacer;
+    pacer_for(vk, scene, naive, capacity, &pacer);
+    const uint32_t chunks = naive ? naive_chunks(scene) : 1;
+    for (size_t first = 0; r == VKRT_OK && first < count;) {
+        const float fraction = (float)((double)first / (double)count);
+        if (params->progress && !params->progress(params->progress_user, "trace", fraction)) {
             r = core_fail(vk->core, VKRT_ERROR_CANCELLED, "trace cancelled by the progress callback");
             break;
         }
-        const size_t first = k * chunk;
-        const uint32_t n = count - first < chunk ? (uint32_t)(count - first) : chunk;
-        if ((r = vk_buffer_upload(vk, &o.rays, rays + first, (VkDeviceSize)n * sizeof *rays)) != VKRT_OK) break;
-        vkrt_gpu_push push = { .tile_width = n, .tile_height = 1, .tri_end = scene->tri_count,
+        /* As many rays as the pacer allows with every naive chunk, at least one workgroup. */
+        uint64_t n = gpu_pacer_items(&pacer, chunks);
+        if (n < VKRT_TRACE_GROUP_SIZE) n = VKRT_TRACE_GROUP_SIZE;
+        if (n > capacity) n = capacity;
+        if (n > count - first) n = count - first;
+        if ((r = vk_buffer_upload(vk, &o.rays, rays + first, n * sizeof *rays)) != VKRT_OK) break;
+        vkrt_gpu_push push = { .tile_width = (uint32_t)n, .tile_height = 1, .tri_end = scene->tri_count,
                                .tri_total = scene->tri_count, .last_chunk = 1 };
         const pass_desc pass = { .pipe = &pipe, .scene = scene, .naive = naive, .budget = budget, .rays = true,
-                                 .first = k == 0, .what = "trace", .progress = params->progress,
-                                 .progress_user = params->progress_user, .fraction = (float)k / (float)chunks };
+                                 .first = first == 0, .what = "trace", .pacer = &pacer, .progress = params->progress,
+                                 .progress_user = params->progress_user, .fraction = fraction };
         if ((r = run_passes(vk, &o, &pass, push, NULL)) != VKRT_OK) break;
         memcpy(out_hits + first, o.readback.mapped, (size_t)n * sizeof *out_hits);
+        first += n;
     }
     if (r == VKRT_OK && params->progress) params->progress(params->progress_user, "trace", 1.0f);
     render_objects_destroy(vk, &o);
@@ -711,7 +932,7 @@ vkrt_result gpu_wavefront_tracer_init(vk_context *vk, gpu_wavefront_tracer *t, c
                                       const gpu_trace_rays_params *params, uint32_t capacity)
 {
     const bool naive = params->traversal == VKRT_TRAVERSAL_NAIVE;
-    const vk_trace_variant variant = ray_variant(vk, params, VKRT_GPU_RAYGEN_WAVEFRONT);
+    const vk_trace_variant variant = ray_variant(vk, scene, params, VKRT_GPU_RAYGEN_WAVEFRONT);
     vkrt_result r = vk_trace_pipeline_get(vk, variant, &t->pipe);
     t->naive = naive;
     t->budget = variant.budget != 0;
@@ -733,8 +954,15 @@ VkBuffer gpu_wavefront_hits(const gpu_wavefront_tracer *t)
     return t->o.hits.buffer;
 }
 
+void gpu_wavefront_pacer(const vk_context *vk, const gpu_scene *scene, bool naive, uint32_t capacity, gpu_pacer *out)
+{
+    pacer_for(vk, scene, naive, capacity, out);
+    /* Stages and traversals take turns: each kind must have been fast before it grows. */
+    out->grow_after = 4;
+}
+
 vkrt_result gpu_wavefront_trace(vk_context *vk, gpu_wavefront_tracer *t, const gpu_scene *scene, uint32_t count,
-                                double *device_ms)
+                                gpu_pacer *pacer, const gpu_wave_progress *progress, double *device_ms)
 {
     if (count > t->capacity)
         return core_fail(vk->core, VKRT_ERROR_INVALID_ARGUMENT, "%u rays exceed the wavefront's %u", count, t->capacity);
@@ -742,7 +970,9 @@ vkrt_result gpu_wavefront_trace(vk_context *vk, gpu_wavefront_tracer *t, const g
     vkrt_gpu_push push = { .tile_width = count, .tile_height = 1, .tri_end = scene->tri_count,
                            .tri_total = scene->tri_count, .last_chunk = 1 };
     const pass_desc pass = { .pipe = &t->pipe, .scene = scene, .naive = t->naive, .budget = t->budget, .rays = true,
-                             .device_only = true, .first = t->first, .what = "render" };
+                             .device_only = true, .first = t->first, .what = "render", .pacer = pacer,
+                             .progress = progress->progress, .progress_user = progress->user,
+                             .fraction = progress->fraction };
     t->first = false;
     return run_passes(vk, &t->o, &pass, push, device_ms);
 }

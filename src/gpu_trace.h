@@ -1,31 +1,51 @@
-/* Drives shaders/trace.comp: scene buffers on the device, a render as a sequence of tile
- * dispatches and arbitrary rays as a sequence of ray chunks (each its own submission, so
- * progress and cancellation happen between them). */
+/* Drives shaders/trace.comp: scene buffers on the device, a render as a sequence of
+ * rectangles of its tiles and arbitrary rays as a sequence of ray chunks, each its own
+ * submission sized by a pacer to about GPU_SUBMIT_TARGET_MS (progress and cancellation happen
+ * between them). */
 #ifndef VKRT_GPU_TRACE_H
 #define VKRT_GPU_TRACE_H
 
 #include "../shaders/vkrt_shared.h"
+#include "gpu_pace.h"
 #include "trace_counts.h"
 #include "vk_buffer.h"
 
+/* One of a scene's large arrays on the device (nodes, triangles, surfaces): one storage buffer,
+ * or, in a split scene, pieces of 2^split_shift elements each (the last one shorter), every
+ * piece a buffer of its own that the shaders reach by its address in the piece table. */
+typedef struct gpu_array {
+    vk_buffer *pieces;         /* count of them (core allocator) */
+    uint32_t count;
+} gpu_array;
+
 typedef struct gpu_scene {
-    vk_buffer nodes;
-    vk_buffer tris;
-    vk_buffer surfaces;        /* vkrt_gpu_surface per triangle, */
+    gpu_array nodes;
+    gpu_array tris;
+    gpu_array surfaces;        /* vkrt_gpu_surface per triangle, */
     vk_buffer materials;       /* the material table, */
     vk_buffer textures;        /* the texture table and */
     vk_buffer texels;          /* the texels: one-element placeholders until a render needs
                                   them (gpu_scene_upload_surfaces) */
+    vk_buffer pieces;          /* the piece table (VKRT_PIECE_ARRAYS vkrt_gpu_address per piece);
+                                  one zero entry when the scene is not split */
+    uint32_t split_shift;      /* 0: one buffer per array; else log2 of the elements per piece
+                                  (VKRT_SPEC_SPLIT of every pipeline that traces the scene) */
     bool surfaces_uploaded;
     uint32_t node_count;
     uint32_t tri_count;
 } gpu_scene;
 
-/* Fails with VKRT_ERROR_LIMIT (naming the buffer and the device limit) when an array exceeds
- * the device's maxStorageBufferRange. */
+/* Uploads the BVH nodes and the triangles. Where the triangles exceed what one buffer may
+ * hold (the device's maxStorageBufferRange and maxMemoryAllocationSize, or the smaller
+ * vk->scene_buffer_limit), every array of the scene is split into pieces; on a device without
+ * bufferDeviceAddress that fails with VKRT_ERROR_LIMIT, naming the array and the limit. */
 vkrt_result gpu_scene_upload(vk_context *vk, const vkrt_gpu_node *nodes, uint32_t node_count,
                              const vkrt_gpu_tri *tris, uint32_t tri_count, gpu_scene *out);
 void gpu_scene_destroy(vk_context *vk, gpu_scene *s);
+
+/* What the scene holds on the device: the bytes of its memory allocations, and the storage
+ * buffers of its nodes and triangles (2 unless it is split). */
+void gpu_scene_usage(const gpu_scene *s, uint64_t *out_bytes, uint32_t *out_buffers);
 
 /* What gpu_scene_upload_surfaces uploads (counts of at least 1). */
 typedef struct gpu_surface_data {
@@ -91,10 +111,23 @@ vkrt_result gpu_wavefront_tracer_init(vk_context *vk, gpu_wavefront_tracer *t, c
                                       const gpu_trace_rays_params *params, uint32_t capacity);
 VkBuffer gpu_wavefront_rays(const gpu_wavefront_tracer *t);
 VkBuffer gpu_wavefront_hits(const gpu_wavefront_tracer *t);
-/* Traces the first `count` rays: one submission, and resume submissions while the loop budget
- * leaves any unfinished. Adds the device time to *device_ms. */
+/* A pacer for a wavefront of up to `capacity` rays (gpu_pace.h): its units are rays times
+ * naive-traversal chunks, and it grows only after the stages and the traversals have all been
+ * fast. */
+void gpu_wavefront_pacer(const vk_context *vk, const gpu_scene *scene, bool naive, uint32_t capacity, gpu_pacer *out);
+
+/* Progress and cancellation between a wavefront traversal's submissions. */
+typedef struct gpu_wave_progress {
+    vkrt_progress_fn progress;  /* may be NULL */
+    void *user;
+    float fraction;
+} gpu_wave_progress;
+
+/* Traces the first `count` rays: one submission, and more while the loop budget leaves any
+ * unfinished or naive traversal has triangle chunks left (as many per submission as the pacer
+ * allows); the pacer learns every submission's time. Adds the device time to *device_ms. */
 vkrt_result gpu_wavefront_trace(vk_context *vk, gpu_wavefront_tracer *t, const gpu_scene *scene, uint32_t count,
-                                double *device_ms);
+                                gpu_pacer *pacer, const gpu_wave_progress *progress, double *device_ms);
 void gpu_wavefront_tracer_destroy(vk_context *vk, gpu_wavefront_tracer *t); /* NULL: no-op */
 
 #endif

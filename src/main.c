@@ -54,6 +54,7 @@ static int exit_code_for(vkrt_result r)
     case VKRT_ERROR_NO_DEVICE:
     case VKRT_ERROR_VULKAN:
     case VKRT_ERROR_OUT_OF_DEVICE_MEMORY:
+    case VKRT_ERROR_DEVICE_LOST:
     case VKRT_ERROR_LIMIT: return EXIT_DEVICE;
     default: return EXIT_INTERNAL;
     }
@@ -145,11 +146,14 @@ static const char render_help[] =
     "\n";
 
 static const char info_help[] =
-    "usage: vkrt info FILE [--bvh sah|midpoint] [--max-leaf N] [--no-normalize]\n"
+    "usage: vkrt info FILE [--bvh sah|midpoint] [--max-leaf N] [--no-normalize] [--backend gpu]\n"
     "Loads FILE, builds its BVH on the CPU (no Vulkan device needed) and prints triangles, nodes,\n"
-    "leaves, depth, SAH cost, load and build times, bytes, bounds and the leaf-size histogram.\n"
+    "leaves, depth, SAH cost, load and build times, bytes, host and device memory per triangle,\n"
+    "bounds and the leaf-size histogram.\n"
     "\n"
     "options:\n"
+    "  --backend gpu             also upload the scene to the device and print the device memory\n"
+    "                            it takes and its storage buffers (more than 2: split)\n"
     "  --bvh sah|midpoint        BVH builder (sah)\n"
     "  --max-leaf N              largest SAH leaf (4)\n"
     "  --no-normalize            keep world coordinates (bounds as in the file)\n"
@@ -158,6 +162,7 @@ static const char info_help[] =
     "  vkrt info bunny.obj\n"
     "  vkrt info dragon.glb --bvh midpoint           compare the SAH cost with the default\n"
     "  vkrt info dragon.glb --max-leaf 1 | grep depth\n"
+    "  vkrt info dragon.glb --backend gpu           device bytes per triangle, measured\n"
     "\n";
 
 static const char devices_help[] =
@@ -696,6 +701,9 @@ static int command_render(options *o)
             fprintf(stderr, "vkrt: %.2f samples per pixel, %" PRIu64 " shadow rays, %" PRIu64 " bounce rays, %u lights\n",
                     (double)stats.samples / ((double)w * h), stats.shadow_rays, stats.bounce_rays, stats.lights);
         if (verbosity >= 2) report_skips(scene, &o->render, &stats);
+        if (verbosity >= 2 && stats.submissions)
+            fprintf(stderr, "vkrt: %u device submissions, the longest %.1f ms (each is sized to about 100 ms)\n",
+                    stats.submissions, stats.longest_submission_ms);
         if (o->render.traversal_counters) {
             double rays = (double)stats.rays;
             fprintf(stderr, "vkrt: per ray: %.2f boxes entered, %.2f leaves entered, %.2f triangle tests\n",
@@ -715,7 +723,10 @@ static int command_info(options *o)
 {
     if (!o->input) return usage_error("%s", "info needs a FILE");
     vkrt_context *ctx = NULL;
-    o->context.backend = VKRT_BACKEND_CPU; /* statistics need no device */
+    /* Statistics need no device; with --backend gpu the scene is also uploaded and its device
+     * memory measured. */
+    const bool on_device = o->context.backend == VKRT_BACKEND_GPU;
+    if (!on_device) o->context.backend = VKRT_BACKEND_CPU;
     vkrt_result r = vkrt_context_create(&o->context, &ctx);
     if (r != VKRT_OK) return fail(NULL, r, "creating the context");
     vkrt_scene *scene = NULL;
@@ -756,6 +767,11 @@ static int command_info(options *o)
            "the surfaces\n",
            (double)s.host_bytes * per_tri, (double)(s.node_bytes + s.triangle_bytes) * per_tri,
            (double)s.surface_bytes * per_tri);
+    if (on_device)
+        printf("device        %" PRIu64 " bytes on %s (%.1f per triangle), nodes and triangles in %u storage "
+               "buffers%s\n",
+               s.device_bytes, vkrt_context_device_name(ctx), (double)s.device_bytes * per_tri, s.device_buffers,
+               s.device_buffers > 2 ? " (split: the triangles exceed one buffer of this device)" : "");
     printf("bounds        (%g, %g, %g) - (%g, %g, %g)\n", s.bounds_min[0], s.bounds_min[1], s.bounds_min[2],
            s.bounds_max[0], s.bounds_max[1], s.bounds_max[2]);
     printf("leaf sizes   ");

@@ -12,6 +12,8 @@ typedef struct trace_counts {
     uint64_t samples;     /* lighting modes: samples taken */
     uint64_t shadow_rays; /* lighting modes: any-hit rays traced */
     uint64_t bounce_rays; /* lighting modes: closest-hit rays after the primary ones */
+    uint32_t submissions; /* GPU: device submissions (gpu_pace.h sizes them) */
+    double longest_submission_ms; /* GPU: wall-clock time of the longest */
 } trace_counts;
 
 #endif

@@ -15,6 +15,58 @@ static int find_memory_type(const VkPhysicalDeviceMemoryProperties *mem, uint32_
     return -1;
 }
 
+/* The Nth call of a test hook's countdown (0: the hook is off): true once, when it reaches 1. */
+static bool countdown_fires(uint32_t *countdown)
+{
+    if (*countdown == 0) return false;
+    return --*countdown == 0;
+}
+
+vkrt_result vk_memory_allocate(vk_context *vk, const VkMemoryAllocateInfo *info, const char *label,
+                               VkDeviceMemory *out)
+{
+    *out = VK_NULL_HANDLE;
+    const VkDeviceSize size = info->allocationSize;
+    const uint32_t heap = vk->memory.memoryTypes[info->memoryTypeIndex].heapIndex;
+    const VkDeviceSize heap_size = vk->memory.memoryHeaps[heap].size;
+    /* A request the heap cannot hold on top of what this context holds already is refused
+     * before the driver is asked: some drivers (lavapipe among them) would overcommit. */
+    if (vk->heap_in_use[heap] + size > heap_size)
+        return core_fail(vk->core, VKRT_ERROR_OUT_OF_DEVICE_MEMORY,
+                         "out of device memory: %s needs %llu bytes, and this context already holds %llu of the "
+                         "device's %llu-byte memory heap",
+                         label, (unsigned long long)size, (unsigned long long)vk->heap_in_use[heap],
+                         (unsigned long long)heap_size);
+    if (vk->memory_budget && vk->memory_in_use + size > vk->memory_budget)
+        return core_fail(vk->core, VKRT_ERROR_OUT_OF_DEVICE_MEMORY,
+                         "out of device memory: %s needs %llu bytes, and this context already holds %llu of its "
+                         "%llu-byte budget",
+                         label, (unsigned long long)size, (unsigned long long)vk->memory_in_use,
+                         (unsigned long long)vk->memory_budget);
+    VkResult res = countdown_fires(&vk->fail_allocation) ? VK_ERROR_OUT_OF_DEVICE_MEMORY
+                                                          : vkAllocateMemory(vk->device, info, NULL, out);
+    if (res != VK_SUCCESS) {
+        *out = VK_NULL_HANDLE;
+        const bool host = res == VK_ERROR_OUT_OF_HOST_MEMORY;
+        if (host || res == VK_ERROR_OUT_OF_DEVICE_MEMORY)
+            return core_fail(vk->core, host ? VKRT_ERROR_OUT_OF_MEMORY : VKRT_ERROR_OUT_OF_DEVICE_MEMORY,
+                             "out of %s memory: vkAllocateMemory of %llu bytes for %s failed: %s",
+                             host ? "host" : "device", (unsigned long long)size, label, vk_result_string(res));
+        return vk_fail(vk, res, "vkAllocateMemory");
+    }
+    vk->memory_in_use += size;
+    vk->heap_in_use[heap] += size;
+    return VKRT_OK;
+}
+
+void vk_memory_free(vk_context *vk, VkDeviceMemory memory, const VkMemoryAllocateInfo *info)
+{
+    if (!memory) return;
+    vkFreeMemory(vk->device, memory, NULL);
+    vk->memory_in_use -= info->allocationSize;
+    vk->heap_in_use[vk->memory.memoryTypes[info->memoryTypeIndex].heapIndex] -= info->allocationSize;
+}
+
 vkrt_result vk_buffer_create(vk_context *vk, VkDeviceSize size, VkBufferUsageFlags usage, vk_memory_use use,
                              const char *label, vk_buffer *out)
 {
@@ -49,19 +101,24 @@ vkrt_result vk_buffer_create(vk_context *vk, VkDeviceSize size, VkBufferUsageFla
     VkMemoryPropertyFlags flags = vk->memory.memoryTypes[type].propertyFlags;
     /* A small scene on a large device may keep host-visible memory that is not device-local,
      * so staging is decided by what the chosen type offers, not by what was asked for. */
+    /* A buffer the shaders reach by address needs memory that has one. */
+    VkMemoryAllocateFlagsInfo address_flags = {
+        .sType = VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_FLAGS_INFO,
+        .flags = VK_MEMORY_ALLOCATE_DEVICE_ADDRESS_BIT,
+    };
     VkMemoryAllocateInfo alloc = {
         .sType = VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO,
+        .pNext = (usage & VK_BUFFER_USAGE_SHADER_DEVICE_ADDRESS_BIT) ? &address_flags : NULL,
         .allocationSize = req.size,
         .memoryTypeIndex = (uint32_t)type,
     };
-    res = vkAllocateMemory(vk->device, &alloc, NULL, &out->memory);
-    if (res != VK_SUCCESS) {
+    vkrt_result r = vk_memory_allocate(vk, &alloc, label, &out->memory);
+    if (r != VKRT_OK) {
         vk_buffer_destroy(vk, out);
-        vkrt_result r = vk_fail(vk, res, "vkAllocateMemory");
-        core_fail(vk->core, r, "vkAllocateMemory of %llu bytes for %s failed: %s", (unsigned long long)req.size,
-                  label, vk_result_string(res));
         return r;
     }
+    out->allocated = req.size;
+    out->memory_type = (uint32_t)type;
     res = vkBindBufferMemory(vk->device, out->buffer, out->memory, 0);
     if (res != VK_SUCCESS) {
         vk_buffer_destroy(vk, out);
@@ -78,11 +135,18 @@ vkrt_result vk_buffer_create(vk_context *vk, VkDeviceSize size, VkBufferUsageFla
     return VKRT_OK;
 }
 
+VkDeviceAddress vk_buffer_address(vk_context *vk, const vk_buffer *b)
+{
+    VkBufferDeviceAddressInfo info = { .sType = VK_STRUCTURE_TYPE_BUFFER_DEVICE_ADDRESS_INFO, .buffer = b->buffer };
+    return vkGetBufferDeviceAddress(vk->device, &info);
+}
+
 void vk_buffer_destroy(vk_context *vk, vk_buffer *b)
 {
     if (b->mapped) vkUnmapMemory(vk->device, b->memory);
     if (b->buffer) vkDestroyBuffer(vk->device, b->buffer, NULL);
-    if (b->memory) vkFreeMemory(vk->device, b->memory, NULL);
+    vk_memory_free(vk, b->memory,
+                   &(VkMemoryAllocateInfo){ .allocationSize = b->allocated, .memoryTypeIndex = b->memory_type });
     memset(b, 0, sizeof *b);
 }
 
@@ -126,6 +190,9 @@ vkrt_result vk_buffer_upload(vk_context *vk, vk_buffer *dst, const void *data, V
 
 vkrt_result vk_commands_begin(vk_context *vk, VkCommandBuffer *out)
 {
+    *out = VK_NULL_HANDLE;
+    vkrt_result r = vk_check_lost(vk);
+    if (r != VKRT_OK) return r;
     VkCommandBufferAllocateInfo alloc = {
         .sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO,
         .commandPool = vk->command_pool,
@@ -156,14 +223,30 @@ vkrt_result vk_commands_submit_wait(vk_context *vk, VkCommandBuffer cmd)
         res = vkCreateFence(vk->device, &fence_info, NULL, &fence);
         call = "vkCreateFence";
     }
+    const bool inject = res == VK_SUCCESS && countdown_fires(&vk->fail_submission);
     if (res == VK_SUCCESS) {
         VkSubmitInfo submit = { .sType = VK_STRUCTURE_TYPE_SUBMIT_INFO, .commandBufferCount = 1, .pCommandBuffers = &cmd };
-        res = vkQueueSubmit(vk->queue, 1, &submit, fence);
+        res = inject && !vk->fail_at_wait ? vk->fail_result : vkQueueSubmit(vk->queue, 1, &submit, fence);
         call = "vkQueueSubmit";
     }
+    bool hung = false;
     if (res == VK_SUCCESS) {
-        res = vkWaitForFences(vk->device, 1, &fence, VK_TRUE, UINT64_MAX);
+        /* Bounded, so a device that never answers cannot hang the caller: submissions are sized
+         * to 100 ms, and drivers report a reset GPU as lost within seconds. */
+        res = vkWaitForFences(vk->device, 1, &fence, VK_TRUE, VK_SUBMIT_TIMEOUT_NS);
+        if (res == VK_SUCCESS && inject) res = vk->fail_result;
         call = "vkWaitForFences";
+        hung = res == VK_TIMEOUT;
+    }
+    if (hung) {
+        /* Still pending: its fence and command buffer wait for the context's destruction. */
+        vk->hung_fence = fence;
+        vk->hung_commands = cmd;
+        vk->lost = true;
+        return core_fail(vk->core, VKRT_ERROR_DEVICE_LOST,
+                         "a submission did not finish within %.0f s: the device is treated as lost; destroy the "
+                         "context, and its scenes, and create a new one",
+                         (double)VK_SUBMIT_TIMEOUT_NS * 1e-9);
     }
     if (fence) vkDestroyFence(vk->device, fence, NULL);
     vkFreeCommandBuffers(vk->device, vk->command_pool, 1, &cmd);

@@ -8,6 +8,8 @@ typedef struct vk_buffer {
     VkBuffer buffer;
     VkDeviceMemory memory;
     VkDeviceSize size;
+    VkDeviceSize allocated;  /* bytes of its device memory allocation (size rounded up by the driver) */
+    uint32_t memory_type;    /* of that allocation */
     void *mapped;        /* persistently mapped when the memory is host-visible, else NULL */
     bool coherent;
 } vk_buffer;
@@ -21,15 +23,34 @@ typedef enum vk_memory_use {
 vkrt_result vk_buffer_create(vk_context *vk, VkDeviceSize size, VkBufferUsageFlags usage, vk_memory_use use,
                              const char *label, vk_buffer *out);
 void vk_buffer_destroy(vk_context *vk, vk_buffer *b);
+/* The device address of a buffer created with VK_BUFFER_USAGE_SHADER_DEVICE_ADDRESS_BIT (which
+ * needs vk->buffer_address). */
+VkDeviceAddress vk_buffer_address(vk_context *vk, const vk_buffer *b);
 
 /* Fills a device buffer: a memcpy when it is mapped, else through a staging buffer. */
 vkrt_result vk_buffer_upload(vk_context *vk, vk_buffer *dst, const void *data, VkDeviceSize size);
 /* Makes device writes visible to the host before reading b->mapped. */
 vkrt_result vk_buffer_invalidate(vk_context *vk, vk_buffer *b);
 
-/* Allocates a primary command buffer from the context pool, begun for one-time submit. */
+/* Every device memory allocation of the library goes through these: they keep
+ * vk->memory_in_use and vk->heap_in_use, refuse what the heap (or the test knob's budget)
+ * cannot hold with VKRT_ERROR_OUT_OF_DEVICE_MEMORY, naming `label`, and honour the
+ * fail_allocation test hook. */
+vkrt_result vk_memory_allocate(vk_context *vk, const VkMemoryAllocateInfo *info, const char *label,
+                               VkDeviceMemory *out);
+/* Frees what vk_memory_allocate made from `info` (the same size and type); NULL: no-op. */
+void vk_memory_free(vk_context *vk, VkDeviceMemory memory, const VkMemoryAllocateInfo *info);
+
+/* How long a submission may take before its device is treated as lost: far beyond the 100 ms
+ * submissions are sized to, and beyond lavapipe compiling a pipeline at its first dispatch. */
+#define VK_SUBMIT_TIMEOUT_NS 120000000000ull
+
+/* Allocates a primary command buffer from the context pool, begun for one-time submit;
+ * VKRT_ERROR_DEVICE_LOST once the device is lost. */
 vkrt_result vk_commands_begin(vk_context *vk, VkCommandBuffer *out);
-/* Ends, submits and waits on a fence, then frees the command buffer. */
+/* Ends, submits and waits on a fence, then frees the command buffer. A lost device
+ * (VK_ERROR_DEVICE_LOST, or no answer within VK_SUBMIT_TIMEOUT_NS) is VKRT_ERROR_DEVICE_LOST
+ * and marks the context lost. */
 vkrt_result vk_commands_submit_wait(vk_context *vk, VkCommandBuffer cmd);
 
 #endif

@@ -28,7 +28,22 @@ vkrt_result vk_fail(vk_context *vk, VkResult result, const char *call)
     vkrt_result r = VKRT_ERROR_VULKAN;
     if (result == VK_ERROR_OUT_OF_HOST_MEMORY) r = VKRT_ERROR_OUT_OF_MEMORY;
     else if (result == VK_ERROR_OUT_OF_DEVICE_MEMORY) r = VKRT_ERROR_OUT_OF_DEVICE_MEMORY;
+    else if (result == VK_ERROR_DEVICE_LOST) r = VKRT_ERROR_DEVICE_LOST;
+    if (r == VKRT_ERROR_DEVICE_LOST) {
+        vk->lost = true;
+        return core_fail(vk->core, r, "%s failed: %s: the device was lost (reset, hung or removed); destroy the "
+                                      "context, and its scenes, and create a new one",
+                         call, vk_result_string(result));
+    }
     return core_fail(vk->core, r, "%s failed: %s", call, vk_result_string(result));
+}
+
+vkrt_result vk_check_lost(vk_context *vk)
+{
+    if (!vk->lost) return VKRT_OK;
+    return core_fail(vk->core, VKRT_ERROR_DEVICE_LOST,
+                     "the Vulkan device was lost in an earlier call; destroy the context, and its scenes, and "
+                     "create a new one");
 }
 
 void vk_label(vk_context *vk, VkObjectType type, uint64_t handle, const char *name)
@@ -260,9 +275,13 @@ static vkrt_result create_device(vk_context *vk)
     vk->timestamp_period_ns = vk->properties.limits.timestampPeriod;
     /* lavapipe ends loops silently after 65,535 iterations per SIMD group; real GPUs have no
      * such limit, and their pipelines keep no budget code. */
-    VkPhysicalDeviceDriverProperties driver = { .sType = VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_DRIVER_PROPERTIES };
+    VkPhysicalDeviceMaintenance3Properties maintenance3 = {
+        .sType = VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_MAINTENANCE_3_PROPERTIES };
+    VkPhysicalDeviceDriverProperties driver = { .sType = VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_DRIVER_PROPERTIES,
+                                                .pNext = &maintenance3 };
     VkPhysicalDeviceProperties2 props2 = { .sType = VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_PROPERTIES_2, .pNext = &driver };
     vkGetPhysicalDeviceProperties2(vk->physical, &props2);
+    vk->max_allocation = maintenance3.maxMemoryAllocationSize;
     bool llvmpipe = driver.driverID == VK_DRIVER_ID_MESA_LLVMPIPE ||
                     vk->properties.deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU;
     vk->trace_budget = llvmpipe ? VKRT_LAVAPIPE_BUDGET : 0;
@@ -272,6 +291,15 @@ static vkrt_result create_device(vk_context *vk)
     vkGetPhysicalDeviceFeatures(vk->physical, &supported);
     vk->float64 = supported.shaderFloat64 == VK_TRUE;
     VkPhysicalDeviceFeatures enabled = { .shaderFloat64 = supported.shaderFloat64 };
+    /* Buffer device addresses let a scene larger than maxStorageBufferRange be split into
+     * pieces (lavapipe has them but not the non-uniform descriptor indexing an array of buffers
+     * would need); scenes that fit one buffer never use them. */
+    VkPhysicalDeviceVulkan12Features supported12 = { .sType = VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_VULKAN_1_2_FEATURES };
+    VkPhysicalDeviceFeatures2 features2 = { .sType = VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_FEATURES_2, .pNext = &supported12 };
+    vkGetPhysicalDeviceFeatures2(vk->physical, &features2);
+    vk->buffer_address = supported12.bufferDeviceAddress == VK_TRUE;
+    VkPhysicalDeviceVulkan12Features enabled12 = { .sType = VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_VULKAN_1_2_FEATURES,
+                                                   .bufferDeviceAddress = supported12.bufferDeviceAddress };
 
     float priority = 1.0f;
     VkDeviceQueueCreateInfo queue = {
@@ -282,6 +310,7 @@ static vkrt_result create_device(vk_context *vk)
     };
     VkDeviceCreateInfo info = {
         .sType = VK_STRUCTURE_TYPE_DEVICE_CREATE_INFO,
+        .pNext = &enabled12,
         .queueCreateInfoCount = 1,
         .pQueueCreateInfos = &queue,
         .pEnabledFeatures = &enabled,
@@ -384,7 +413,11 @@ void vk_context_destroy(vk_context *vk)
 {
     if (!vk) return;
     if (vk->device) {
+        /* A lost device answers at once (VK_ERROR_DEVICE_LOST); a hung submission's objects can
+         * only be freed once the device is idle. */
         vkDeviceWaitIdle(vk->device);
+        if (vk->hung_fence) vkDestroyFence(vk->device, vk->hung_fence, NULL);
+        if (vk->hung_commands) vkFreeCommandBuffers(vk->device, vk->command_pool, 1, &vk->hung_commands);
         vk_pipelines_destroy(vk);
         save_pipeline_cache(vk);
         if (vk->pipeline_cache) vkDestroyPipelineCache(vk->device, vk->pipeline_cache, NULL);

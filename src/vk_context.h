@@ -25,12 +25,38 @@ typedef struct vk_context {
     bool timestamps;                  /* the queue supports timestamp queries */
     double timestamp_period_ns;
     bool float64;                     /* shaderFloat64 enabled: the shader refines hit distances in double */
+    bool buffer_address;              /* bufferDeviceAddress enabled: a scene beyond one storage buffer
+                                         is split into pieces the shaders reach by address */
+    VkDeviceSize max_allocation;      /* maxMemoryAllocationSize: one device memory allocation at most */
     uint32_t trace_budget;            /* BVH loop iterations per dispatch (VKRT_SPEC_BUDGET); 0: unlimited */
     VkCommandPool command_pool;
     VkPipelineCache pipeline_cache;
     char *pipeline_cache_path;        /* NULL: in memory only */
     uint32_t validation_messages;     /* validation warnings and errors received */
+    bool lost;                        /* a call returned VK_ERROR_DEVICE_LOST (or a fence never
+                                         signalled): nothing is submitted any more */
+    VkFence hung_fence;               /* a submission whose fence timed out, and its command */
+    VkCommandBuffer hung_commands;    /* buffer: freed at destruction, after the device is idle */
+    VkDeviceSize memory_in_use;       /* device memory this context has allocated and not freed, */
+    VkDeviceSize heap_in_use[VK_MAX_MEMORY_HEAPS]; /* in all and per memory heap */
     struct vk_pipelines *pipelines;   /* compiled lazily, owned (vk_pipeline.c) */
+    /* Test knobs: zero from vk_context_create, set by tests through this private header only. */
+    VkDeviceSize scene_buffer_limit;  /* 0: the device's limits; else the most bytes one buffer of a
+                                         scene's arrays may hold, so small scenes split into pieces
+                                         (at least 128: two triangles) */
+    double submit_target_ms;          /* 0: GPU_SUBMIT_TARGET_MS; else the time each submission aims
+                                         at (tiny: every submission as small as it can be) */
+    VkDeviceSize memory_budget;       /* 0: none; else device memory allocations that would take
+                                         memory_in_use past this many bytes fail as out of device
+                                         memory, without asking the driver */
+    uint32_t fail_allocation;         /* 0: none; N: the Nth device memory allocation from now fails
+                                         with VK_ERROR_OUT_OF_DEVICE_MEMORY (once) */
+    uint32_t fail_submission;         /* 0: none; N: the Nth submission from now returns
+                                         fail_result (once), from vkQueueSubmit (nothing is
+                                         submitted) or, with fail_at_wait, from vkWaitForFences
+                                         (after the real wait, so the work has finished) */
+    VkResult fail_result;
+    bool fail_at_wait;
 } vk_context;
 
 /* Creates everything for the device the desc chooses. Failures: VKRT_ERROR_NO_DEVICE (no
@@ -42,8 +68,12 @@ void vk_context_destroy(vk_context *vk);
 
 vkrt_result vk_devices_list(core *c, vkrt_device_info *out, uint32_t *inout_count);
 
-/* Records a failed Vulkan call: maps VkResult to a vkrt_result and names the call. */
+/* Records a failed Vulkan call: maps VkResult to a vkrt_result (VK_ERROR_DEVICE_LOST also marks
+ * the context lost) and names the call. */
 vkrt_result vk_fail(vk_context *vk, VkResult result, const char *call);
+/* VKRT_ERROR_DEVICE_LOST, with a message saying so, once the device is lost; else VKRT_OK.
+ * Every path that would use the device asks first. */
+vkrt_result vk_check_lost(vk_context *vk);
 const char *vk_result_string(VkResult result);
 
 /* Labels a Vulkan object for validation messages and debuggers, where debug utils exist. */

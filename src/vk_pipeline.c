@@ -120,21 +120,27 @@ static vkrt_result create_layouts(vk_context *vk, vk_pipelines *p)
     return create_layout_pair(vk, VKRT_BINDING_COUNT, VKRT_BINDING_IMAGE, &p->set_layout, &p->layout);
 }
 
-/* trace.comp with "#define VKRT_HAS_FLOAT64" after its #version line where the device has
- * doubles: the Float64 capability may only appear in a module for a device that enabled it,
- * and a specialization constant cannot remove a capability. NULL when out of memory. */
+/* A shader with "#define VKRT_HAS_FLOAT64" and "#define VKRT_HAS_BUFFER_ADDRESS" after its
+ * #version line where the device has doubles and buffer device addresses: the Float64 and
+ * PhysicalStorageBufferAddresses capabilities may only appear in a module for a device that
+ * enabled them, and a specialization constant cannot remove a capability. NULL when out of
+ * memory. */
 static char *shader_source(vk_context *vk, const char *source)
 {
-    static const char define[] = "#define VKRT_HAS_FLOAT64 1\n";
+    static const char float64[] = "#define VKRT_HAS_FLOAT64 1\n";
+    static const char address[] = "#define VKRT_HAS_BUFFER_ADDRESS 1\n";
     const char *version = strstr(source, "#version");
     const char *after = version ? strchr(version, '\n') : NULL;
-    size_t head = after && vk->float64 ? (size_t)(after + 1 - source) : 0;
-    size_t length = strlen(source), extra = head ? sizeof define - 1 : 0;
-    char *text = core_alloc_array(vk->core, length + extra + 1, 1);
+    size_t head = after ? (size_t)(after + 1 - source) : 0;
+    size_t extra_f = head && vk->float64 ? sizeof float64 - 1 : 0;
+    size_t extra_a = head && vk->buffer_address ? sizeof address - 1 : 0;
+    size_t length = strlen(source);
+    char *text = core_alloc_array(vk->core, length + extra_f + extra_a + 1, 1);
     if (!text) return NULL;
     memcpy(text, source, head);
-    memcpy(text + head, define, extra);
-    memcpy(text + head + extra, source + head, length - head + 1);
+    memcpy(text + head, float64, extra_f);
+    memcpy(text + head + extra_f, address, extra_a);
+    memcpy(text + head + extra_f + extra_a, source + head, length - head + 1);
     return text;
 }
 
@@ -238,6 +244,7 @@ vkrt_result vk_trace_pipeline_get(vk_context *vk, vk_trace_variant variant, vk_t
         { VKRT_SPEC_ALPHA, offsetof(vk_trace_variant, alpha), sizeof(uint32_t) },
         { VKRT_SPEC_ANYHIT, offsetof(vk_trace_variant, anyhit), sizeof(uint32_t) },
         { VKRT_SPEC_TEXTURES, offsetof(vk_trace_variant, textures), sizeof(uint32_t) },
+        { VKRT_SPEC_SPLIT, offsetof(vk_trace_variant, split), sizeof(uint32_t) },
     };
     VkPipeline pipeline;
     r = create_pipeline(vk, p->trace_module, p->layout, entries, sizeof entries / sizeof entries[0], &variant,
@@ -285,6 +292,7 @@ vkrt_result vk_shade_pipeline_get(vk_context *vk, vk_shade_variant variant, vk_t
         { VKRT_SPEC_SHADE_STAGE, offsetof(vk_shade_variant, stage), sizeof(uint32_t) },
         { VKRT_SPEC_SHADE_MODE, offsetof(vk_shade_variant, mode), sizeof(uint32_t) },
         { VKRT_SPEC_SHADE_FEATURES, offsetof(vk_shade_variant, features), sizeof(uint32_t) },
+        { VKRT_SPEC_SHADE_SPLIT, offsetof(vk_shade_variant, split), sizeof(uint32_t) },
     };
     VkPipeline pipeline;
     r = create_pipeline(vk, p->shade_module, p->shade_layout, entries, sizeof entries / sizeof entries[0], &variant,

@@ -1,7 +1,7 @@
 /* The trace pipeline: GLSL embedded in the library compiled to SPIR-V through glslang's C API
  * (once per context), one descriptor set layout and pipeline layout, and one compute pipeline
- * per specialisation (mode, traversal, heat, ray source, intersector, budget, counters), created on
- * first use and kept. */
+ * per specialisation (mode, traversal, heat, ray source, intersector, budget, counters, alpha,
+ * any-hit, split), created on first use and kept. */
 #ifndef VKRT_VK_PIPELINE_H
 #define VKRT_VK_PIPELINE_H
 
@@ -21,6 +21,7 @@ typedef struct vk_trace_variant {
     uint32_t alpha;      /* 1: alpha-test hits (VKRT_SPEC_ALPHA) */
     uint32_t anyhit;     /* 1: stop at the first hit (VKRT_SPEC_ANYHIT) */
     uint32_t textures;   /* 1: the scene has textures (VKRT_SPEC_TEXTURES) */
+    uint32_t split;      /* the scene's gpu_scene.split_shift (VKRT_SPEC_SPLIT) */
 } vk_trace_variant;
 
 typedef struct vk_trace_pipeline {
@@ -38,6 +39,7 @@ typedef struct vk_shade_variant {
     uint32_t stage;      /* VKRT_STAGE_* */
     uint32_t mode;       /* VKRT_GPU_MODE_SHADED, _AO or _PATH */
     uint32_t features;   /* VKRT_GPU_FEATURE_* */
+    uint32_t split;      /* the scene's gpu_scene.split_shift (VKRT_SPEC_SHADE_SPLIT) */
 } vk_shade_variant;
 
 /* As vk_trace_pipeline_get, for shade.comp (its own module, set layout and pipeline layout). */

@@ -20,6 +20,9 @@
  *   log callback of the context, if one is given.
  * - Thread-safety: calls on the same object are not thread-safe unless noted; different
  *   contexts may be used from different threads at once.
+ * - Device failures: VKRT_ERROR_OUT_OF_DEVICE_MEMORY leaves the context usable (free something
+ *   and retry); VKRT_ERROR_DEVICE_LOST is final: every later call on the context that needs the
+ *   device fails with it at once, and the context (and its scenes) can only be destroyed.
  */
 #ifndef VKRT_H
 #define VKRT_H
@@ -55,7 +58,8 @@ uint32_t vkrt_version(void);
     X(VKRT_ERROR_VULKAN, "Vulkan call failed")                                             \
     X(VKRT_ERROR_OUT_OF_DEVICE_MEMORY, "out of device memory")                             \
     X(VKRT_ERROR_LIMIT, "the scene exceeds a limit of the device or of vkrt")              \
-    X(VKRT_ERROR_CANCELLED, "cancelled by the progress callback")
+    X(VKRT_ERROR_CANCELLED, "cancelled by the progress callback")                          \
+    X(VKRT_ERROR_DEVICE_LOST, "the Vulkan device was lost (reset, hung or removed)")
 
 typedef enum vkrt_result {
 #define VKRT_RESULT_ENUM_(name, message) name,
@@ -223,9 +227,11 @@ typedef struct vkrt_scene_desc {
 typedef struct vkrt_scene vkrt_scene;
 
 /* Loads a mesh (or makes the built-in scene), builds its BVH and, for the GPU backend,
- * uploads it. Bad input returns VKRT_ERROR_IO, _PARSE, _INVALID_GEOMETRY, _EMPTY_SCENE or
- * _UNSUPPORTED with a message naming the file and the problem. The scene belongs to ctx and
- * must be destroyed before it. */
+ * uploads it (split across storage buffers where its triangles exceed one; see
+ * vkrt_scene_stats.device_buffers). Bad input returns VKRT_ERROR_IO, _PARSE, _INVALID_GEOMETRY,
+ * _EMPTY_SCENE or _UNSUPPORTED with a message naming the file and the problem; a device that
+ * cannot hold the scene VKRT_ERROR_OUT_OF_DEVICE_MEMORY, or VKRT_ERROR_LIMIT where it cannot
+ * split it. The scene belongs to ctx and must be destroyed before it. */
 vkrt_result vkrt_scene_create(vkrt_context *ctx, const vkrt_scene_desc *desc, vkrt_scene **out_scene);
 void vkrt_scene_destroy(vkrt_scene *scene);
 
@@ -256,6 +262,14 @@ typedef struct vkrt_scene_stats {
                                       KHR_lights_punctual) */
     uint64_t emissive_triangles;   /* triangles whose material emits: the area lights */
     bool has_metals;               /* some material is metallic (the lighting modes' GGX code) */
+    uint64_t device_bytes;         /* GPU backend: the device memory the scene holds now, as
+                                      allocated (nodes, triangles, the piece table of a split
+                                      scene, and the surfaces once a render has uploaded them);
+                                      0 on the CPU backend */
+    uint32_t device_buffers;       /* GPU backend: storage buffers holding the nodes and the
+                                      triangles: 2, or more where the triangles exceed what one
+                                      buffer of the device may hold (maxStorageBufferRange) and
+                                      the scene is split across buffers; 0 on the CPU backend */
 } vkrt_scene_stats;
 
 vkrt_result vkrt_scene_stats_get(const vkrt_scene *scene, vkrt_scene_stats *out_stats);
@@ -392,7 +406,8 @@ typedef struct vkrt_render_desc {
                                  specialisation changes nothing) */
     float *out_error;         /* NULL (default), or width * height floats (borrowed): each pixel's
                                  estimated standard error of its mean luminance (lighting modes) */
-    vkrt_progress_fn progress;/* NULL (default): none; called between tiles */
+    vkrt_progress_fn progress;/* NULL (default): none; GPU: called between every two device
+                                 submissions (each sized to about 100 ms); CPU: between tiles */
     void *progress_user;
 } vkrt_render_desc;
 
@@ -417,6 +432,11 @@ typedef struct vkrt_render_stats {
     uint64_t bounce_rays;     /* extension rays traced after the primary ones (closest-hit) */
     bool naive_by_cost;       /* the default traversal chose naive: the scene's SAH cost (C_trav =
                                  C_isect = 1) was not below its triangle count */
+    uint32_t submissions;     /* GPU: device submissions the render took; each is sized to take
+                                 about 100 ms (progress and cancellation come between them) */
+    double longest_submission_ms; /* GPU: wall-clock time of the longest of them, from submission to
+                                 its fence (the first use of a pipeline includes its compilation
+                                 on drivers that compile at first dispatch, such as lavapipe) */
 } vkrt_render_stats;
 
 /* Floats vkrt_render() writes for an image of width x height: 4 per pixel (RGBA), rows top
@@ -425,7 +445,9 @@ size_t vkrt_render_floats(uint32_t width, uint32_t height);
 
 /* Traces one primary ray per pixel and writes raw values (see vkrt_mode) into out_rgba.
  * out_rgba must hold out_floats >= vkrt_render_floats(width, height) floats (borrowed for the
- * call). stats may be NULL. */
+ * call). stats may be NULL. Returns VKRT_ERROR_CANCELLED when the progress callback says so
+ * (out_rgba is then incomplete), VKRT_ERROR_OUT_OF_DEVICE_MEMORY or VKRT_ERROR_DEVICE_LOST (see
+ * the conventions above). */
 vkrt_result vkrt_render(vkrt_context *ctx, vkrt_scene *scene, const vkrt_render_desc *desc,
                         float *out_rgba, size_t out_floats, vkrt_render_stats *out_stats);
 
@@ -457,7 +479,8 @@ typedef struct vkrt_trace_desc {
                                      visited */
     vkrt_intersector intersector; /* default: watertight */
     vkrt_precision precision;     /* default: float; double needs the CPU backend */
-    vkrt_progress_fn progress;    /* NULL (default): none */
+    vkrt_progress_fn progress;    /* NULL (default): none; called between submissions (GPU) or
+                                     blocks of rays (CPU) */
     void *progress_user;
 } vkrt_trace_desc;
 

@@ -216,6 +216,13 @@ if grep -qE '^triangles +3674$' "$tmp/info" && grep -q '^sah cost' "$tmp/info" &
    && grep -q '^build' "$tmp/info" && grep -q '^bytes' "$tmp/info" && grep -q '^depth' "$tmp/info"; then
   ok "info prints triangles, depth, SAH cost, leaf sizes, build time, bytes"
 else bad "info output"; cat "$tmp/info"; fi
+if grep -qE '^memory +host [0-9.]+ bytes per triangle; device' "$tmp/info" && ! grep -q '^device ' "$tmp/info"; then
+  ok "info prints host and device memory per triangle, no device line on the CPU"
+else bad "info memory line"; cat "$tmp/info"; fi
+"$vkrt" info "$models/meshes/bunny.obj" --backend gpu --validation >"$tmp/info_gpu" 2>"$tmp/err"
+if grep -qE '^device +[0-9]+ bytes on .* \([0-9.]+ per triangle\), nodes and triangles in 2 storage buffers$' "$tmp/info_gpu"; then
+  ok "info --backend gpu measures the device memory and buffers"
+else bad "info --backend gpu"; cat "$tmp/info_gpu" "$tmp/err"; fi
 "$vkrt" devices >"$tmp/devices" 2>"$tmp/err"
 if grep -qE '^0: ' "$tmp/devices"; then ok "devices lists a device"; else bad "devices lists a device"; fi
 expect "render on --device 0" 0 "$vkrt" render --device 0 -o "$tmp/d0.png" --size 16x16

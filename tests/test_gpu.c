@@ -343,6 +343,7 @@ static void gpu_shared_layouts_match_c(void)
     vkrt_gpu_lighting lightings[2];
     vkrt_gpu_path paths[2];
     vkrt_gpu_accum accums[2];
+    vkrt_gpu_address addresses[2];
     fill_distinct(nodes, sizeof nodes, 100.0f);
     fill_distinct(tris, sizeof tris, 200.0f);
     fill_distinct(hits, sizeof hits, 300.0f);
@@ -358,15 +359,18 @@ static void gpu_shared_layouts_match_c(void)
     fill_distinct(lightings, sizeof lightings, 1200.0f);
     fill_distinct(paths, sizeof paths, 1300.0f);
     fill_distinct(accums, sizeof accums, 1400.0f);
-    enum { PARTS = 15, BUFFERS = 15, MAX_WORDS = 256 };
+    fill_distinct(addresses, sizeof addresses, 1500.0f);
+    enum { PARTS = 16, BUFFERS = 16, MAX_WORDS = 256 };
     /* The order in which layout_check.comp writes the structs out. */
     const void *parts[PARTS] = { &nodes[1],    &tris[1],      &hits[1],     &rays[1],      &push,
                                  &states[1],   &entries[1],   &counters[1], &surfaces[1],  &materials[1],
-                                 &textures[1], &lights[1],    &lightings[1], &paths[1],    &accums[1] };
+                                 &textures[1], &lights[1],    &lightings[1], &paths[1],    &accums[1],
+                                 &addresses[1] };
     const size_t part_sizes[PARTS] = { sizeof nodes[1],    sizeof tris[1],     sizeof hits[1],      sizeof rays[1],
                                        sizeof push,        sizeof states[1],   sizeof entries[1],   sizeof counters[1],
                                        sizeof surfaces[1], sizeof materials[1], sizeof textures[1], sizeof lights[1],
-                                       sizeof lightings[1], sizeof paths[1],   sizeof accums[1] };
+                                       sizeof lightings[1], sizeof paths[1],   sizeof accums[1],
+                                       sizeof addresses[1] };
     uint32_t expected[MAX_WORDS];
     size_t words = 0;
     for (int i = 0; i < PARTS; i++) {
@@ -379,11 +383,11 @@ static void gpu_shared_layouts_match_c(void)
     /* Binding 3 receives the words; every other binding is an input. */
     vk_buffer buffers[BUFFERS] = { 0 };
     const void *data[BUFFERS] = { nodes,    tris,     hits,   NULL,   rays,   states, entries, counters,
-                                  surfaces, materials, textures, lights, lightings, paths, accums };
+                                  surfaces, materials, textures, lights, lightings, paths, accums, addresses };
     const size_t sizes[BUFFERS] = { sizeof nodes,     sizeof tris,      sizeof hits,     MAX_WORDS * 4,
                                     sizeof rays,      sizeof states,    sizeof entries,  sizeof counters,
                                     sizeof surfaces,  sizeof materials, sizeof textures, sizeof lights,
-                                    sizeof lightings, sizeof paths,     sizeof accums };
+                                    sizeof lightings, sizeof paths,     sizeof accums,   sizeof addresses };
     bool ok = create_check_buffers(buffers, data, sizes, BUFFERS);
     ok = ok && run_check_shader("layout_check.comp", vkrt_shader_layout_check_comp, buffers, BUFFERS, &push, sizeof push, 1);
     if (ok) {
