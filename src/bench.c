@@ -12,6 +12,7 @@
 #include <string.h>
 #include <unistd.h>
 
+#include "bench_csv.h"
 #include "cli_contexts.h"
 
 /* Naive traversal is benchmarked where it costs at most this many ray-triangle tests per
@@ -177,37 +178,27 @@ static void print_row(const bench *b, const row *w)
     fflush(b->out);
 }
 
-/* The rows as CSV, written beside the target and renamed over it. */
+/* The rows as CSV. */
 static vkrt_result write_csv(const bench *b, const char *path)
 {
-    size_t n = strlen(path) + 16;
-    char *tmp = malloc(n);
-    if (!tmp) return VKRT_ERROR_OUT_OF_MEMORY;
-    snprintf(tmp, n, "%s.tmp-vkrt", path);
-    FILE *f = fopen(tmp, "w");
-    bool ok = f != NULL;
-    if (ok) {
-        fprintf(f, "scene,triangles,width,height,builder,backend,traversal,intersector,precision,build_ms,sah_cost,"
-                   "bytes_per_triangle,trace_ms,total_ms,mrays_per_s,boxes_per_ray,leaves_per_ray,tests_per_ray,"
-                   "mismatched_pixels,depth_rel_rmse,depth_rel_max\n");
-        for (unsigned i = 0; i < b->row_count; i++) {
-            const row *w = &b->rows[i];
-            const vkrt_scene_stats *s = &w->scene;
-            fprintf(f, "\"%s\",%llu,%u,%u,%s,%s,%s,%s,%s,%.4f,%.6f,%.3f,%.4f,%.4f,%.6f,%.4f,%.4f,%.4f,%llu,%.6e,%.6e\n",
-                    b->o->input ? b->o->input : "built-in", (unsigned long long)s->triangles, b->width, b->height,
-                    builder_name(w->c.builder), backend_name(w->c.backend), traversal_name(w->c.traversal),
-                    isect_name(w->c.intersector), precision_name(w->c.precision), s->build_ms, s->sah_cost,
-                    (double)(s->node_bytes + s->triangle_bytes) / (double)s->triangles, w->trace_ms, w->total_ms,
-                    w->mrays, w->nodes_per_ray, w->leaves_per_ray, w->tris_per_ray,
-                    (unsigned long long)w->mismatched, w->depth_rmse, w->depth_max);
-        }
-        ok = !ferror(f);
-        ok = fclose(f) == 0 && ok;
+    bench_csv csv;
+    vkrt_result r = bench_csv_begin(&csv, path, "scene,triangles,width,height,builder,backend,traversal,intersector,"
+                                                "precision,build_ms,sah_cost,bytes_per_triangle,trace_ms,total_ms,"
+                                                "mrays_per_s,boxes_per_ray,leaves_per_ray,tests_per_ray,"
+                                                "mismatched_pixels,depth_rel_rmse,depth_rel_max");
+    if (r != VKRT_OK) return r;
+    for (unsigned i = 0; i < b->row_count; i++) {
+        const row *w = &b->rows[i];
+        const vkrt_scene_stats *s = &w->scene;
+        fprintf(csv.f, "\"%s\",%llu,%u,%u,%s,%s,%s,%s,%s,%.4f,%.6f,%.3f,%.4f,%.4f,%.6f,%.4f,%.4f,%.4f,%llu,%.6e,%.6e\n",
+                b->o->input ? b->o->input : "built-in", (unsigned long long)s->triangles, b->width, b->height,
+                builder_name(w->c.builder), backend_name(w->c.backend), traversal_name(w->c.traversal),
+                isect_name(w->c.intersector), precision_name(w->c.precision), s->build_ms, s->sah_cost,
+                (double)(s->node_bytes + s->triangle_bytes) / (double)s->triangles, w->trace_ms, w->total_ms,
+                w->mrays, w->nodes_per_ray, w->leaves_per_ray, w->tris_per_ray, (unsigned long long)w->mismatched,
+                w->depth_rmse, w->depth_max);
     }
-    if (ok) ok = rename(tmp, path) == 0;
-    if (!ok) remove(tmp);
-    free(tmp);
-    return ok ? VKRT_OK : VKRT_ERROR_IO;
+    return bench_csv_end(&csv);
 }
 
 static vkrt_result load_scenes(bench *b)

@@ -11,6 +11,9 @@
 #include <unistd.h>
 
 #include "bench.h"
+#ifdef VKRT_HAVE_EMBREE
+#include "bench_compare.h"
+#endif
 #include "stress.h"
 #include "vkrt.h"
 
@@ -194,7 +197,7 @@ static const char stress_help[] =
     "\n";
 
 static const char bench_help[] =
-    "usage: vkrt bench [FILE] [--quick] [--csv OUT.csv] [--size WxH] [--repeat N] [options]\n"
+    "usage: vkrt bench [FILE] [--quick] [--csv OUT.csv] [--size WxH] [--repeat N] [--compare embree] [options]\n"
     "Renders one view of FILE (the built-in scene when none) with every configuration: backend\n"
     "(gpu, cpu), BVH builder (sah, midpoint), traversal (bvh; naive where it costs at most 1e8\n"
     "ray-triangle tests), intersector (watertight, mt) and, on the CPU, precision (float, double).\n"
@@ -209,11 +212,17 @@ static const char bench_help[] =
     "  --size WxH                512x512\n"
     "  --repeat N                5 timed renders after the warm-up\n"
     "  --backend gpu|cpu         only that backend (default: both)\n"
+    "  --compare embree          instead: the same primary and AO rays on the same triangles\n"
+    "                            through vkrt_trace_rays (both backends) and Embree 3\n"
+    "                            (rtcIntersect1, rtcOccluded1, as many threads as the CPU\n"
+    "                            backend): Mrays/s, the vkrt/Embree ratio, hit checksums and\n"
+    "                            mismatches (needs a build with libembree-dev)\n"
     "  --eye, --target, --up, --fov, --no-normalize, --device N, --threads N, --validation, -q\n"
     "                            as for render\n"
     "\n"
     "examples:\n"
     "  vkrt bench                                    the built-in scene, every configuration\n"
+    "  vkrt bench bunny.obj --compare embree         vkrt against Embree on the bunny\n"
     "  vkrt bench dragon.glb --csv dragon.csv        and the rows as CSV\n"
     "  vkrt bench bunny.obj --backend gpu --size 1024x1024 --repeat 9\n"
     "\n";
@@ -251,6 +260,7 @@ typedef struct options {
     uint32_t repeat; /* timed renders after one warm-up; 0: a single render */
     bool quick;      /* stress, bench: the reduced run */
     const char *csv; /* bench: CSV output */
+    bool compare_embree; /* bench: vkrt against Embree on the same rays */
 } options;
 
 static bool parse_vec3(const char *s, float v[3])
@@ -471,6 +481,14 @@ static int parse_args(int argc, char **argv, options *o)
         } else if (!strcmp(arg, "--csv")) {
             NEED_VALUE();
             o->csv = value;
+        } else if (!strcmp(arg, "--compare")) {
+            NEED_VALUE();
+            if (strcmp(value, "embree")) return usage_error("unknown --compare '%s' (embree)", value);
+#ifndef VKRT_HAVE_EMBREE
+            return usage_error("--compare %s: this vkrt was built without Embree (install Debian's libembree-dev, "
+                               "then `meson setup --reconfigure build`)", value);
+#endif
+            o->compare_embree = true;
         } else if (!strcmp(arg, "--counters")) {
             o->render.traversal_counters = true;
         } else if (!strcmp(arg, "--quick")) {
@@ -832,7 +850,12 @@ static int command_bench(options *o)
     };
     bo.context.pipeline_cache_path = pipeline_cache_path(cache_buf, sizeof cache_buf);
     bench_report report;
-    vkrt_result r = bench_run(&bo, &report);
+    vkrt_result r;
+#ifdef VKRT_HAVE_EMBREE
+    if (o->compare_embree) r = bench_compare_run(&bo, &report);
+    else
+#endif
+        r = bench_run(&bo, &report);
     return suite_exit_code(o, r, report.error, report.validation_messages);
 }
 
