@@ -25,6 +25,10 @@ typedef struct bench_options {
     FILE *out;                 /* the markdown table; NULL: stdout */
     const char *csv_path;      /* also write the rows as CSV here (atomically); NULL: no CSV */
     bool progress;             /* a progress line on stderr (a terminal) */
+    /* bench_modes_run only: */
+    uint32_t reference_spp;    /* samples per pixel of the converged references; 0: 1024
+                                  (quick: 256) */
+    const char *cache_dir;     /* where references are kept between runs; NULL: nowhere */
 } bench_options;
 
 typedef struct bench_report {

@@ -116,6 +116,50 @@ PY
 then ok "bench CSV: 18 configurations, finite figures, the reference row exact"; else bad "bench CSV: 18 configurations, finite figures, the reference row exact"; fi
 expect "bench with a FILE that does not exist fails as input" 3 "$vkrt" bench "$tmp/missing.obj" --quick
 expect "bench --compare with an unknown engine is a usage error" 2 "$vkrt" bench --quick --compare nothing
+# bench --modes: the lighting modes against converged references kept in a cache; a second run
+# reads them back and measures the same errors. Errors finite (PSNR infinite only where the
+# image is exact), timings unchecked.
+expect "bench --quick --modes --csv" 0 "$vkrt" bench --quick --modes --cache "$tmp/refs" --csv "$tmp/modes.csv"
+cp "$tmp/out" "$tmp/modes.md"
+expect "bench --quick --modes from the cache" 0 "$vkrt" bench --quick --modes --backend cpu --cache "$tmp/refs" \
+  --csv "$tmp/modes_cpu.csv"
+if python3 - "$tmp/modes.csv" "$tmp/modes.md" "$tmp/modes_cpu.csv" "$tmp/out" "$tmp/refs" <<'PY'
+import csv, math, os, sys
+rows = list(csv.DictReader(open(sys.argv[1])))
+table = [l for l in open(sys.argv[2]) if l.startswith("| ") and not l.startswith("| mode")]
+# per mode and backend: spp 1 and 4, two adaptive targets, every feature compiled in
+assert len(rows) == len(table) == 3 * 2 * 5, (len(rows), len(table))
+keys = {(r["mode"], r["backend"], r["spp"], r["target_error"], r["features"]) for r in rows}
+assert len(keys) == 30, keys
+for r in rows:
+    for k in ("trace_ms", "total_ms", "mrays_per_s", "spp_taken", "rmse", "rel_mse", "reference_noise"):
+        v = float(r[k])
+        assert math.isfinite(v) and v >= 0, (k, r)
+    assert float(r["trace_ms"]) > 0 and int(r["reference_spp"]) == 256, r
+    psnr = float(r["psnr_db"])
+    assert (math.isinf(psnr) and float(r["rmse"]) == 0) or (math.isfinite(psnr) and psnr > 0), r
+    assert 1 <= float(r["spp_taken"]) <= int(r["spp"]), r
+    if r["mode"] != "shaded":  # shaded under the default rig is exact at one sample
+        assert 0 < float(r["rmse"]) < 0.5, r
+# more samples, less error: each backend's 4 spp row beats its 1 spp row
+err = {(r["mode"], r["backend"], r["spp"]): float(r["rmse"]) for r in rows if r["features"] == "specialised"
+       and float(r["target_error"]) == 0}
+for mode in ("ao", "path"):
+    for b in ("gpu", "cpu"):
+        assert err[(mode, b, "4")] < err[(mode, b, "1")], (mode, b, err)
+# the second run read all three references from the cache and measured the same errors
+header = open(sys.argv[4]).read()
+assert header.count("read from the cache") == 3, header
+assert len([f for f in os.listdir(sys.argv[5]) if f.startswith("ref-")]) == 3, os.listdir(sys.argv[5])
+again = {(r["mode"], r["spp"], r["target_error"], r["features"]): r["rmse"] for r in csv.DictReader(open(sys.argv[3]))}
+for r in rows:
+    if r["backend"] == "cpu":
+        assert again[(r["mode"], r["spp"], r["target_error"], r["features"])] == r["rmse"], r
+PY
+then ok "bench --modes CSV: 30 rows, finite errors falling with spp, references cached"
+else bad "bench --modes CSV: 30 rows, finite errors falling with spp, references cached"; fi
+expect "bench --modes with --compare is a usage error" 2 "$vkrt" bench --quick --modes --compare embree
+expect "bench --ref-spp 0 is a usage error" 2 "$vkrt" bench --quick --modes --ref-spp 0
 # bench --compare embree: the same rays through Embree and vkrt's backends, every query; the
 # checksums agree and (nearly) every ray gets the same answer. Timings are not checked.
 if [ "$embree" = embree ]; then
