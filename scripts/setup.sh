@@ -18,6 +18,7 @@ packages=(
   clang libclang-rt-14-dev                    # scripts/fuzz: libFuzzer and the sanitizers for clang
   valgrind                                    # test_valgrind: memcheck on CPU-backend runs
   libembree-dev                               # vkrt bench --compare embree (optional in the build)
+  python3-matplotlib                          # scripts/bench's plots (scripts/bench_plots.py)
 )
 
 missing=()
