@@ -13,6 +13,7 @@
 #include <unistd.h>
 
 #include "bench_csv.h"
+#include "bench_scene.h"
 #include "cli_contexts.h"
 
 /* Naive traversal is benchmarked where it costs at most this many ray-triangle tests per
@@ -41,6 +42,7 @@ typedef struct row {
 
 typedef struct bench {
     const bench_options *o;
+    bench_scene source;
     bench_report *report;
     FILE *out;
     vkrt_context *gpu, *cpu;
@@ -159,7 +161,7 @@ static void print_header(const bench *b, const vkrt_scene_stats *s)
 {
     fprintf(b->out, "vkrt bench: %s (%llu triangles), %ux%u, %s; median of %u timed render%s after a warm-up;\n"
                     "errors against the CPU double-precision reference (watertight, SAH BVH)\n\n",
-            b->o->input ? b->o->input : "built-in scene", (unsigned long long)s->triangles, b->width, b->height,
+            bench_scene_name(&b->source), (unsigned long long)s->triangles, b->width, b->height,
             b->gpu ? vkrt_context_device_name(b->gpu) : "CPU only", b->repeat, b->repeat == 1 ? "" : "s");
     fprintf(b->out, "| builder | backend | traversal | isect | precision | build ms | SAH cost | bytes/tri | trace ms "
                     "| total ms | Mrays/s | boxes/ray | leaves/ray | tests/ray | mismatched px | depth RMSE | max depth err |\n"
@@ -191,7 +193,7 @@ static vkrt_result write_csv(const bench *b, const char *path)
         const row *w = &b->rows[i];
         const vkrt_scene_stats *s = &w->scene;
         fprintf(csv.f, "\"%s\",%llu,%u,%u,%s,%s,%s,%s,%s,%.4f,%.6f,%.3f,%.4f,%.4f,%.6f,%.4f,%.4f,%.4f,%llu,%.6e,%.6e\n",
-                b->o->input ? b->o->input : "built-in", (unsigned long long)s->triangles, b->width, b->height,
+                bench_scene_name(&b->source), (unsigned long long)s->triangles, b->width, b->height,
                 builder_name(w->c.builder), backend_name(w->c.backend), traversal_name(w->c.traversal),
                 isect_name(w->c.intersector), precision_name(w->c.precision), s->build_ms, s->sah_cost,
                 (double)(s->node_bytes + s->triangle_bytes) / (double)s->triangles, w->trace_ms, w->total_ms,
@@ -207,8 +209,8 @@ static vkrt_result load_scenes(bench *b)
         for (int m = 0; m < 2; m++) {
             vkrt_context *ctx = m ? b->cpu : b->gpu;
             if (!ctx) continue;
-            vkrt_scene_desc d = { .path = b->o->input, .keep_world_coordinates = b->o->keep_world_coordinates,
-                                  .builder = k ? VKRT_BVH_BUILDER_MIDPOINT : VKRT_BVH_BUILDER_DEFAULT };
+            vkrt_scene_desc d = bench_scene_desc(&b->source);
+            d.builder = k ? VKRT_BVH_BUILDER_MIDPOINT : VKRT_BVH_BUILDER_DEFAULT;
             vkrt_result r = vkrt_scene_create(ctx, &d, &b->scenes[k][m]);
             if (r != VKRT_OK) {
                 snprintf(b->report->error, sizeof b->report->error, "%s", vkrt_context_last_error(ctx));
@@ -282,6 +284,7 @@ vkrt_result bench_run(const bench_options *o, bench_report *out)
         snprintf(out->error, sizeof out->error, "out of memory for %ux%u images", b.width, b.height);
         r = VKRT_ERROR_OUT_OF_MEMORY;
     }
+    if (r == VKRT_OK) r = bench_scene_init(&b.source, o, out->error, sizeof out->error);
     if (r == VKRT_OK) r = load_scenes(&b);
     const config reference = { VKRT_BVH_BUILDER_DEFAULT, VKRT_BACKEND_CPU, VKRT_TRAVERSAL_BVH,
                                VKRT_INTERSECTOR_WATERTIGHT, VKRT_PRECISION_DOUBLE };
@@ -294,6 +297,7 @@ vkrt_result bench_run(const bench_options *o, bench_report *out)
     out->validation_messages = vkrt_context_validation_messages(b.gpu) + vkrt_context_validation_messages(b.cpu);
     for (int k = 0; k < 2; k++)
         for (int m = 0; m < 2; m++) vkrt_scene_destroy(b.scenes[k][m]);
+    bench_scene_free(&b.source);
     free(b.rows);
     free(b.image);
     free(b.ref_id);

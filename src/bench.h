@@ -17,6 +17,8 @@ typedef struct bench_options {
                                   is ignored (see backend below) */
     vkrt_backend backend;      /* _DEFAULT: both GPU and CPU; else that one only */
     const char *input;         /* mesh file; NULL: the built-in scene */
+    uint32_t procedural;       /* > 0: instead, a procedural scene of about this many triangles
+                                  (bench_scene.h) */
     bool keep_world_coordinates;
     vkrt_camera camera;        /* zero: the default view */
     uint32_t width, height;    /* 0: 512x512 (quick: 64x64) */

@@ -22,6 +22,7 @@
 
 #include "bench_csv.h"
 #include "bench_embree.h"
+#include "bench_scene.h"
 #include "cli_contexts.h"
 
 /* Two closest hits on different triangles are still the same point when their distances agree
@@ -57,6 +58,7 @@ typedef struct crow {
 
 typedef struct compare {
     const bench_options *o;
+    bench_scene source;
     bench_report *report;
     FILE *out;
     vkrt_context *gpu, *cpu;
@@ -241,7 +243,7 @@ static void print_header(const compare *c)
                     "(on the GPU with the upload of the rays and the readback of the hits);\nprimary rays through the "
                     "pixel centres, then %d cosine-distributed AO rays per primary hit from vkrt_ray_offset origins, "
                     "up to distance %g\n\n",
-            c->o->input ? c->o->input : "built-in scene", (unsigned long long)s->triangles, c->width, c->height,
+            bench_scene_name(&c->source), (unsigned long long)s->triangles, c->width, c->height,
             bench_embree_version(), c->threads, c->threads == 1 ? "" : "s",
             c->gpu ? vkrt_context_device_name(c->gpu) : "not run", c->repeat, c->repeat == 1 ? "" : "s",
             BENCH_COMPARE_AO_RAYS_PER_HIT, (double)BENCH_COMPARE_AO_DISTANCE);
@@ -274,7 +276,7 @@ static vkrt_result write_csv(const compare *c, const char *path)
         char sum[32] = "";
         if (w->q != QUERY_AO_ANY) snprintf(sum, sizeof sum, "%.9e", w->sum_t);
         fprintf(csv.f, "\"%s\",%llu,%u,%u,%u,%s,%s,%s,%zu,%.4f,%.3f,%.4f,%.6f,%.6f,%llu,%s,%llu,%.3e\n",
-                c->o->input ? c->o->input : "built-in", (unsigned long long)c->stats[ENGINE_VKRT_CPU].triangles,
+                bench_scene_name(&c->source), (unsigned long long)c->stats[ENGINE_VKRT_CPU].triangles,
                 c->width, c->height, c->threads, query_rays(w->q), query_name(w->q), engine_name(w->e), w->rays,
                 w->build_ms, w->bytes_per_tri, w->trace_ms, w->mrays, w->ratio, (unsigned long long)w->hits, sum,
                 (unsigned long long)w->mismatches, w->t_rel_max);
@@ -289,7 +291,7 @@ static vkrt_result load(compare *c)
     for (engine e = ENGINE_VKRT_CPU; e <= ENGINE_VKRT_GPU; e++) {
         vkrt_context *ctx = e == ENGINE_VKRT_CPU ? c->cpu : c->gpu;
         if (!ctx) continue;
-        vkrt_scene_desc d = { .path = c->o->input, .keep_world_coordinates = c->o->keep_world_coordinates };
+        vkrt_scene_desc d = bench_scene_desc(&c->source);
         vkrt_result r = vkrt_scene_create(ctx, &d, &c->scene[e]);
         if (r != VKRT_OK) {
             snprintf(c->report->error, sizeof c->report->error, "%s", vkrt_context_last_error(ctx));
@@ -362,6 +364,7 @@ vkrt_result bench_compare_run(const bench_options *o, bench_report *out)
     c.threads = o->context.cpu_threads ? o->context.cpu_threads : cores > 0 ? (uint32_t)cores : 1;
     vkrt_result r = cli_contexts_create(&o->context, o->backend != VKRT_BACKEND_CPU, &c.gpu, &c.cpu, out->error,
                                         sizeof out->error);
+    if (r == VKRT_OK) r = bench_scene_init(&c.source, o, out->error, sizeof out->error);
     if (r == VKRT_OK) r = load(&c);
     if (r == VKRT_OK) r = run_rows(&c);
     if (r == VKRT_OK && o->csv_path && (r = write_csv(&c, o->csv_path)) != VKRT_OK)
@@ -375,6 +378,7 @@ vkrt_result bench_compare_run(const bench_options *o, bench_report *out)
     free(c.rays[0]);
     free(c.rays[1]);
     bench_embree_destroy(c.embree);
+    bench_scene_free(&c.source);
     vkrt_context_destroy(c.gpu);
     vkrt_context_destroy(c.cpu);
     return r;

@@ -17,6 +17,7 @@
 
 #include "bench_csv.h"
 #include "bench_reference.h"
+#include "bench_scene.h"
 #include "cli_contexts.h"
 
 /* Independent of the rows' seed 0 (any other value would do). */
@@ -50,6 +51,7 @@ typedef struct reference {
 
 typedef struct modes {
     const bench_options *o;
+    bench_scene source;
     bench_report *report;
     FILE *out;
     vkrt_context *gpu, *cpu;
@@ -186,7 +188,7 @@ static vkrt_result write_csv(const modes *m, const char *path, uint64_t triangle
         char psnr[16];
         format_psnr(w->psnr, psnr, sizeof psnr);
         fprintf(csv.f, "\"%s\",%llu,%u,%u,%s,%s,%u,%g,%s,%u,%.4f,%.4f,%.4f,%.6f,%.6e,%.6e,%s,%u,%.6e\n",
-                m->o->input ? m->o->input : "built-in", (unsigned long long)triangles, m->width, m->height,
+                bench_scene_name(&m->source), (unsigned long long)triangles, m->width, m->height,
                 mode_name(w->mode), backend_name(w->backend), w->spp, (double)w->target_error,
                 w->all_features ? "all" : "specialised", w->features, w->spp_taken, w->trace_ms, w->total_ms, w->mrays,
                 w->rmse, w->rel_mse, psnr, ref->spp, ref->info.noise);
@@ -206,6 +208,7 @@ static vkrt_result make_references(modes *m, bool progress)
         ref->spp = spp;
         if (progress) fprintf(stderr, "\rbench --modes: the %s reference, %u spp on the CPU   ", mode_name(MODES[k]), spp);
         bench_reference_desc d = { .cpu = m->cpu, .scene = m->scene[1], .scene_path = m->o->input,
+                                   .scene_name = bench_scene_name(&m->source),
                                    .keep_world_coordinates = m->o->keep_world_coordinates, .render = &rd,
                                    .cache_dir = m->o->cache_dir };
         vkrt_result r = bench_reference_get(&d, ref->rgba, &ref->info, m->report->error, sizeof m->report->error);
@@ -220,7 +223,7 @@ static void print_header(const modes *m, uint64_t triangles)
     fprintf(m->out, "vkrt bench --modes: %s (%llu triangles), %ux%u, %s; median of %u timed render%s after a warm-up;\n"
                     "errors of linear RGB against a converged reference (CPU, another seed; relMSE epsilon %g, PSNR "
                     "peak 1):\n",
-            m->o->input ? m->o->input : "built-in scene", (unsigned long long)triangles, m->width, m->height,
+            bench_scene_name(&m->source), (unsigned long long)triangles, m->width, m->height,
             m->gpu ? vkrt_context_device_name(m->gpu) : "CPU only", m->repeat, m->repeat == 1 ? "" : "s", REL_MSE_EPS);
     for (int k = 0; k < 3; k++) {
         const reference *ref = &m->ref[k];
@@ -299,6 +302,7 @@ vkrt_result bench_modes_run(const bench_options *o, bench_report *out)
     m.floats = vkrt_render_floats(m.width, m.height);
     vkrt_result r = cli_contexts_create(&o->context, o->backend != VKRT_BACKEND_CPU, &m.gpu, &m.cpu, out->error,
                                         sizeof out->error);
+    if (r == VKRT_OK) r = bench_scene_init(&m.source, o, out->error, sizeof out->error);
     if (r == VKRT_OK && !(m.image = malloc(m.floats * sizeof *m.image))) {
         snprintf(out->error, sizeof out->error, "out of memory for a %ux%u image", m.width, m.height);
         r = VKRT_ERROR_OUT_OF_MEMORY;
@@ -306,7 +310,7 @@ vkrt_result bench_modes_run(const bench_options *o, bench_report *out)
     for (int k = 0; k < 2 && r == VKRT_OK; k++) {
         vkrt_context *ctx = k ? m.cpu : m.gpu;
         if (!ctx) continue;
-        vkrt_scene_desc d = { .path = o->input, .keep_world_coordinates = o->keep_world_coordinates };
+        vkrt_scene_desc d = bench_scene_desc(&m.source);
         if ((r = vkrt_scene_create(ctx, &d, &m.scene[k])) != VKRT_OK)
             snprintf(out->error, sizeof out->error, "%s", vkrt_context_last_error(ctx));
     }
@@ -323,6 +327,7 @@ vkrt_result bench_modes_run(const bench_options *o, bench_report *out)
     for (int k = 0; k < 3; k++) free(m.ref[k].rgba);
     vkrt_scene_destroy(m.scene[0]);
     vkrt_scene_destroy(m.scene[1]);
+    bench_scene_free(&m.source);
     free(m.rows);
     free(m.image);
     vkrt_context_destroy(m.gpu);

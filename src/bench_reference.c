@@ -56,7 +56,7 @@ static bool make_key(const bench_reference_desc *d, char *key, char *error, size
         key_add(key, &len, " scene=%s size=%lld mtime=%lld.%09ld", d->scene_path, (long long)st.st_size,
                 (long long)st.st_mtim.tv_sec, (long)st.st_mtim.tv_nsec);
     } else {
-        key_add(key, &len, " scene=built-in");
+        key_add(key, &len, " scene=%s", d->scene_name);
     }
     key_add(key, &len, " world=%d size=%ux%u mode=%d isect=%d spp=%u seed=%u ao=%u,%a bounces=%u",
             (int)d->keep_world_coordinates, r->width, r->height, (int)r->mode, (int)r->intersector, r->spp, r->seed,

@@ -14,7 +14,8 @@ typedef struct bench_reference_desc {
     vkrt_context *cpu;          /* a CPU-backend context ... */
     vkrt_scene *scene;          /* ... and its scene */
     const char *scene_path;     /* the file the scene came from (its size and modification time
-                                   join the key); NULL: the built-in scene */
+                                   join the key); NULL: scene_name alone names it */
+    const char *scene_name;     /* "built-in", "procedural-N" */
     bool keep_world_coordinates;
     const vkrt_render_desc *render; /* the render to converge: mode, size, camera, lights, sky,
                                        ao and path settings; spp and seed are the reference's */

@@ -224,6 +224,8 @@ static const char bench_help[] =
     "                            compiled in, on both backends, at 128x128 (quick: 64x64), 3\n"
     "                            timed renders: time, samples taken, and RMSE, relMSE, PSNR\n"
     "                            against a converged CPU reference\n"
+    "  --procedural N            instead of FILE: a rippled torus of about N triangles (the\n"
+    "                            scaling series; exactly 2*R*C, R x C quads, C = 3R)\n"
     "  --ref-spp N               the references' samples per pixel (1024; quick: 256)\n"
     "  --cache DIR               where references are kept between runs, keyed by scene and\n"
     "                            settings (~/.cache/vkrt/bench; empty: nowhere)\n"
@@ -234,6 +236,7 @@ static const char bench_help[] =
     "  vkrt bench                                    the built-in scene, every configuration\n"
     "  vkrt bench bunny.obj --compare embree         vkrt against Embree on the bunny\n"
     "  vkrt bench --modes --csv modes.csv            the lighting modes' time against error\n"
+    "  vkrt bench --procedural 1000000 --backend cpu a million procedural triangles\n"
     "  vkrt bench dragon.glb --csv dragon.csv        and the rows as CSV\n"
     "  vkrt bench bunny.obj --backend gpu --size 1024x1024 --repeat 9\n"
     "\n";
@@ -275,6 +278,7 @@ typedef struct options {
     bool modes;          /* bench: the lighting modes against converged references */
     uint32_t reference_spp; /* bench --modes: the references' spp; 0: the default */
     const char *cache_dir;  /* bench --modes: --cache; NULL: the default place */
+    uint32_t procedural;    /* bench: --procedural N */
 } options;
 
 static bool parse_vec3(const char *s, float v[3])
@@ -503,6 +507,10 @@ static int parse_args(int argc, char **argv, options *o)
                                "then `meson setup --reconfigure build`)", value);
 #endif
             o->compare_embree = true;
+        } else if (!strcmp(arg, "--procedural")) {
+            NEED_VALUE();
+            if (!parse_u32(value, &o->procedural) || o->procedural < 18 || o->procedural > 100000000)
+                return usage_error("bad --procedural '%s' (triangles, 18 to 100000000)", value);
         } else if (!strcmp(arg, "--modes")) {
             o->modes = true;
         } else if (!strcmp(arg, "--ref-spp")) {
@@ -878,10 +886,12 @@ static const char *reference_cache_dir(const options *o, char *buf, size_t size)
 static int command_bench(options *o)
 {
     if (o->modes && o->compare_embree) return usage_error("%s", "--modes and --compare are separate runs: give one");
+    if (o->procedural && o->input) return usage_error("--procedural replaces the FILE ('%s'): give one", o->input);
     char cache_buf[4200], ref_buf[4200];
     bench_options bo = {
         .context = o->context, .backend = o->context.backend, .input = o->input,
-        .keep_world_coordinates = o->scene.keep_world_coordinates, .camera = o->render.camera,
+        .procedural = o->procedural, .keep_world_coordinates = o->scene.keep_world_coordinates,
+        .camera = o->render.camera,
         .width = o->render.width, .height = o->render.height, .repeat = o->repeat, .quick = o->quick,
         .csv_path = o->csv, .progress = verbosity >= 1 && !getenv("CI"), .reference_spp = o->reference_spp,
         .cache_dir = reference_cache_dir(o, ref_buf, sizeof ref_buf),

@@ -158,6 +158,17 @@ for r in rows:
 PY
 then ok "bench --modes CSV: 30 rows, finite errors falling with spp, references cached"
 else bad "bench --modes CSV: 30 rows, finite errors falling with spp, references cached"; fi
+# bench --procedural N: the scaling series' scene, named by its exact triangle count
+expect "bench --quick --procedural" 0 "$vkrt" bench --quick --procedural 2000 --backend cpu --csv "$tmp/proc.csv"
+if python3 - "$tmp/proc.csv" <<'PY'
+import csv, sys
+rows = list(csv.DictReader(open(sys.argv[1])))
+assert rows and all(r["scene"] == "procedural-" + r["triangles"] for r in rows), rows[0]
+assert abs(int(rows[0]["triangles"]) - 2000) < 200 and all(int(r["mismatched_pixels"]) == 0 for r in rows), rows
+PY
+then ok "bench --procedural: about N triangles, named by the count, no mismatched pixel"
+else bad "bench --procedural: about N triangles, named by the count, no mismatched pixel"; fi
+expect "bench --procedural with a FILE is a usage error" 2 "$vkrt" bench "$models/meshes/bunny.obj" --procedural 2000
 expect "bench --modes with --compare is a usage error" 2 "$vkrt" bench --quick --modes --compare embree
 expect "bench --ref-spp 0 is a usage error" 2 "$vkrt" bench --quick --modes --ref-spp 0
 # bench --compare embree: the same rays through Embree and vkrt's backends, every query; the
