@@ -53,6 +53,7 @@ typedef struct bench {
     float *ref_id, *ref_depth; /* the CPU double reference (watertight, SAH BVH) */
     row *rows;
     unsigned row_count, row_cap;
+    char gpu_skipped[1200];    /* why the GPU rows were not run (a scene beyond its limits) */
 } bench;
 
 static const char *builder_name(vkrt_bvh_builder b) { return b == VKRT_BVH_BUILDER_MIDPOINT ? "midpoint" : "sah"; }
@@ -211,11 +212,9 @@ static vkrt_result load_scenes(bench *b)
             if (!ctx) continue;
             vkrt_scene_desc d = bench_scene_desc(&b->source);
             d.builder = k ? VKRT_BVH_BUILDER_MIDPOINT : VKRT_BVH_BUILDER_DEFAULT;
-            vkrt_result r = vkrt_scene_create(ctx, &d, &b->scenes[k][m]);
-            if (r != VKRT_OK) {
-                snprintf(b->report->error, sizeof b->report->error, "%s", vkrt_context_last_error(ctx));
-                return r;
-            }
+            vkrt_result r = bench_scene_create(ctx, !m, &d, &b->scenes[k][m], b->gpu_skipped, sizeof b->gpu_skipped,
+                                               b->report->error, sizeof b->report->error);
+            if (r != VKRT_OK) return r;
         }
     }
     return VKRT_OK;
@@ -258,6 +257,7 @@ static vkrt_result run_configs(bench *b)
         print_row(b, &b->rows[i]);
     }
     if (progress) fprintf(stderr, "\r%60s\r", "");
+    if (b->gpu_skipped[0]) fprintf(b->out, "\n%s\n", b->gpu_skipped);
     if (!naive)
         fprintf(b->out, "\nnaive traversal not run: %.3g ray-triangle tests per render (limit %.0e); it tests every "
                         "triangle, %llu per ray\n",

@@ -73,6 +73,7 @@ typedef struct compare {
     vkrt_hit *hits[ENGINE_COUNT];      /* the last query's, per engine */
     crow rows[QUERY_COUNT * ENGINE_COUNT];
     unsigned row_count;
+    char gpu_skipped[1200];            /* why vkrt-gpu was not run (a scene beyond its limits) */
 } compare;
 
 static double now_ms(void)
@@ -247,6 +248,7 @@ static void print_header(const compare *c)
             bench_embree_version(), c->threads, c->threads == 1 ? "" : "s",
             c->gpu ? vkrt_context_device_name(c->gpu) : "not run", c->repeat, c->repeat == 1 ? "" : "s",
             BENCH_COMPARE_AO_RAYS_PER_HIT, (double)BENCH_COMPARE_AO_DISTANCE);
+    if (c->gpu_skipped[0]) fprintf(c->out, "%s\n\n", c->gpu_skipped);
     if (s->alpha_tested)
         fprintf(c->out, "alpha-masked materials: vkrt passes through masked texels, Embree sees every triangle; the "
                         "checksums differ by design\n\n");
@@ -292,21 +294,20 @@ static vkrt_result load(compare *c)
         vkrt_context *ctx = e == ENGINE_VKRT_CPU ? c->cpu : c->gpu;
         if (!ctx) continue;
         vkrt_scene_desc d = bench_scene_desc(&c->source);
-        vkrt_result r = vkrt_scene_create(ctx, &d, &c->scene[e]);
-        if (r != VKRT_OK) {
-            snprintf(c->report->error, sizeof c->report->error, "%s", vkrt_context_last_error(ctx));
-            return r;
-        }
-        vkrt_scene_stats_get(c->scene[e], &c->stats[e]);
+        vkrt_result r = bench_scene_create(ctx, e == ENGINE_VKRT_GPU, &d, &c->scene[e], c->gpu_skipped,
+                                           sizeof c->gpu_skipped, c->report->error, sizeof c->report->error);
+        if (r != VKRT_OK) return r;
+        if (c->scene[e]) vkrt_scene_stats_get(c->scene[e], &c->stats[e]);
     }
+    const bool gpu = c->scene[ENGINE_VKRT_GPU] != NULL;
     size_t n = c->stats[ENGINE_VKRT_CPU].triangles * 9;
-    float *tris[2] = { malloc(n * sizeof(float)), c->gpu ? malloc(n * sizeof(float)) : NULL };
-    vkrt_result r = tris[0] && (tris[1] || !c->gpu) ? VKRT_OK : VKRT_ERROR_OUT_OF_MEMORY;
+    float *tris[2] = { malloc(n * sizeof(float)), gpu ? malloc(n * sizeof(float)) : NULL };
+    vkrt_result r = tris[0] && (tris[1] || !gpu) ? VKRT_OK : VKRT_ERROR_OUT_OF_MEMORY;
     if (r == VKRT_OK) r = vkrt_scene_triangles_get(c->scene[ENGINE_VKRT_CPU], tris[0], n);
-    if (r == VKRT_OK && c->gpu) r = vkrt_scene_triangles_get(c->scene[ENGINE_VKRT_GPU], tris[1], n);
+    if (r == VKRT_OK && gpu) r = vkrt_scene_triangles_get(c->scene[ENGINE_VKRT_GPU], tris[1], n);
     if (r != VKRT_OK) {
         snprintf(c->report->error, sizeof c->report->error, "the scene's triangles: %s", vkrt_result_string(r));
-    } else if (c->gpu && memcmp(tris[0], tris[1], n * sizeof(float)) != 0) {
+    } else if (gpu && memcmp(tris[0], tris[1], n * sizeof(float)) != 0) {
         snprintf(c->report->error, sizeof c->report->error, "the CPU and GPU scenes hold different triangles");
         r = VKRT_ERROR_INVALID_GEOMETRY;
     }

@@ -62,6 +62,7 @@ typedef struct modes {
     reference ref[3];       /* shaded, ao, path */
     mrow *rows;
     unsigned row_count, row_cap;
+    char gpu_skipped[1200]; /* why the GPU rows were not run (a scene beyond its limits) */
 } modes;
 
 static const vkrt_mode MODES[3] = { VKRT_MODE_SHADED, VKRT_MODE_AO, VKRT_MODE_PATH };
@@ -230,6 +231,7 @@ static void print_header(const modes *m, uint64_t triangles)
         fprintf(m->out, "  %s: %u spp, its own estimated error %.2e, %s in %.1f s\n", mode_name(MODES[k]), ref->spp,
                 ref->info.noise, ref->info.cached ? "read from the cache" : "rendered", ref->info.ms / 1e3);
     }
+    if (m->gpu_skipped[0]) fprintf(m->out, "%s\n", m->gpu_skipped);
     fprintf(m->out, "\n| mode | backend | spp | target error | features | spp taken | trace ms | total ms | Mrays/s "
                     "| RMSE | relMSE | PSNR dB |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n");
 }
@@ -267,7 +269,7 @@ static vkrt_result run_rows(modes *m)
     const uint32_t feature_spp = m->o->quick ? spps[spp_count - 1] : FEATURE_ROWS_SPP;
     vkrt_backend backends[2];
     unsigned nb = 0;
-    if (m->gpu) backends[nb++] = VKRT_BACKEND_GPU;
+    if (m->scene[0]) backends[nb++] = VKRT_BACKEND_GPU;
     if (m->o->backend != VKRT_BACKEND_GPU) backends[nb++] = VKRT_BACKEND_CPU;
     const unsigned groups = spp_count + target_count;
     const bool progress = m->o->progress && isatty(STDERR_FILENO);
@@ -311,8 +313,8 @@ vkrt_result bench_modes_run(const bench_options *o, bench_report *out)
         vkrt_context *ctx = k ? m.cpu : m.gpu;
         if (!ctx) continue;
         vkrt_scene_desc d = bench_scene_desc(&m.source);
-        if ((r = vkrt_scene_create(ctx, &d, &m.scene[k])) != VKRT_OK)
-            snprintf(out->error, sizeof out->error, "%s", vkrt_context_last_error(ctx));
+        r = bench_scene_create(ctx, !k, &d, &m.scene[k], m.gpu_skipped, sizeof m.gpu_skipped, out->error,
+                               sizeof out->error);
     }
     vkrt_scene_stats s = { 0 };
     if (r == VKRT_OK) vkrt_scene_stats_get(m.scene[1], &s);

@@ -83,6 +83,18 @@ const char *bench_scene_name(const bench_scene *s)
     return s->label[0] ? s->label : s->o->input;
 }
 
+vkrt_result bench_scene_create(vkrt_context *ctx, bool gpu, const vkrt_scene_desc *desc, vkrt_scene **out_scene,
+                               char *skipped, size_t skipped_size, char *error, size_t error_size)
+{
+    vkrt_result r = vkrt_scene_create(ctx, desc, out_scene);
+    if (r == VKRT_ERROR_LIMIT && gpu) {
+        snprintf(skipped, skipped_size, "the GPU backend was not run: %s", vkrt_context_last_error(ctx));
+        return VKRT_OK;
+    }
+    if (r != VKRT_OK) snprintf(error, error_size, "%s", vkrt_context_last_error(ctx));
+    return r;
+}
+
 void bench_scene_free(bench_scene *s)
 {
     free(s->positions);
