@@ -17,6 +17,8 @@ packages=(
   dpkg-dev                                    # apt-get source, for cgltf.h
   clang libclang-rt-14-dev                    # scripts/fuzz: libFuzzer and the sanitizers for clang
   valgrind                                    # test_valgrind: memcheck on CPU-backend runs
+  libembree-dev                               # vkrt bench --compare embree (optional in the build)
+  python3-matplotlib                          # scripts/bench's plots (scripts/bench_plots.py)
 )
 
 missing=()

@@ -12,6 +12,7 @@
 #include "gpu_integrate.h"
 #include "lights.h"
 #include "mesh.h"
+#include "ray_offset.h"
 #include "scene_pack.h"
 
 #define DEFAULT_IMAGE_SIZE 1024u
@@ -332,6 +333,26 @@ vkrt_result vkrt_scene_stats_get(const vkrt_scene *scene, vkrt_scene_stats *out_
     return VKRT_OK;
 }
 
+vkrt_result vkrt_scene_triangles_get(const vkrt_scene *scene, float *out_positions, size_t out_floats)
+{
+    if (!scene) return VKRT_ERROR_INVALID_ARGUMENT;
+    core *c = &scene->ctx->core;
+    core_clear_error(c);
+    if (!out_positions) return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "out_positions is NULL");
+    size_t tris = scene->bvh.tri_count;
+    if (out_floats / 9 < tris)
+        return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "out_positions holds %zu floats; %zu triangles need %zu",
+                         out_floats, tris, tris * 9);
+    /* The packed array is in BVH order; prim_id is each triangle's place in the loaded file. */
+    for (size_t k = 0; k < tris; k++) {
+        const vkrt_gpu_tri *t = &scene->tris[k];
+        float *o = out_positions + (size_t)t->prim_id * 9;
+        const vkrt_float3 corners[3] = { t->v0, t->v1, t->v2 };
+        for (int i = 0; i < 3; i++) o[3 * i] = corners[i].x, o[3 * i + 1] = corners[i].y, o[3 * i + 2] = corners[i].z;
+    }
+    return VKRT_OK;
+}
+
 /* ---- rendering ---- */
 
 /* The scene as the CPU tracer reads it. */
@@ -587,6 +608,38 @@ vkrt_result vkrt_render(vkrt_context *ctx, vkrt_scene *scene, const vkrt_render_
 }
 
 /* ---- arbitrary rays ---- */
+
+vkrt_result vkrt_camera_rays(vkrt_context *ctx, const vkrt_camera *camera, uint32_t width, uint32_t height,
+                             vkrt_ray *out_rays, size_t out_count)
+{
+    if (!ctx) return VKRT_ERROR_INVALID_ARGUMENT;
+    core *c = &ctx->core;
+    core_clear_error(c);
+    if (!out_rays) return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "out_rays is NULL");
+    if (!width || !height || width > MAX_IMAGE_SIZE || height > MAX_IMAGE_SIZE)
+        return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "image size %ux%u is not 1 to %u on a side", width, height,
+                         MAX_IMAGE_SIZE);
+    size_t pixels = (size_t)width * height;
+    if (out_count < pixels)
+        return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "out_rays holds %zu rays; a %ux%u image needs %zu", out_count,
+                         width, height, pixels);
+    vkrt_gpu_push push = { 0 };
+    vkrt_result r = camera_setup(c, camera ? camera : &(vkrt_camera){ 0 }, width, height, &push);
+    if (r != VKRT_OK) return r;
+    for (uint32_t y = 0; y < height; y++) {
+        for (uint32_t x = 0; x < width; x++) {
+            vkrt_gpu_ray g = cpu_trace_camera_ray(&push, x, y);
+            memcpy(&out_rays[(size_t)y * width + x], &g, sizeof g); /* one layout (asserted above) */
+        }
+    }
+    return VKRT_OK;
+}
+
+void vkrt_ray_offset(const float p[3], const float n[3], float out_origin[3])
+{
+    vkrt_float3 o = ray_offset((vkrt_float3){ p[0], p[1], p[2] }, (vkrt_float3){ n[0], n[1], n[2] });
+    out_origin[0] = o.x, out_origin[1] = o.y, out_origin[2] = o.z;
+}
 
 vkrt_result vkrt_trace_rays(vkrt_context *ctx, vkrt_scene *scene, const vkrt_trace_desc *desc, const vkrt_ray *rays,
                             size_t count, vkrt_hit *out_hits)

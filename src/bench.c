@@ -12,6 +12,8 @@
 #include <string.h>
 #include <unistd.h>
 
+#include "bench_csv.h"
+#include "bench_scene.h"
 #include "cli_contexts.h"
 
 /* Naive traversal is benchmarked where it costs at most this many ray-triangle tests per
@@ -40,6 +42,7 @@ typedef struct row {
 
 typedef struct bench {
     const bench_options *o;
+    bench_scene source;
     bench_report *report;
     FILE *out;
     vkrt_context *gpu, *cpu;
@@ -50,6 +53,7 @@ typedef struct bench {
     float *ref_id, *ref_depth; /* the CPU double reference (watertight, SAH BVH) */
     row *rows;
     unsigned row_count, row_cap;
+    char gpu_skipped[1200];    /* why the GPU rows were not run (a scene beyond its limits) */
 } bench;
 
 static const char *builder_name(vkrt_bvh_builder b) { return b == VKRT_BVH_BUILDER_MIDPOINT ? "midpoint" : "sah"; }
@@ -158,7 +162,7 @@ static void print_header(const bench *b, const vkrt_scene_stats *s)
 {
     fprintf(b->out, "vkrt bench: %s (%llu triangles), %ux%u, %s; median of %u timed render%s after a warm-up;\n"
                     "errors against the CPU double-precision reference (watertight, SAH BVH)\n\n",
-            b->o->input ? b->o->input : "built-in scene", (unsigned long long)s->triangles, b->width, b->height,
+            bench_scene_name(&b->source), (unsigned long long)s->triangles, b->width, b->height,
             b->gpu ? vkrt_context_device_name(b->gpu) : "CPU only", b->repeat, b->repeat == 1 ? "" : "s");
     fprintf(b->out, "| builder | backend | traversal | isect | precision | build ms | SAH cost | bytes/tri | trace ms "
                     "| total ms | Mrays/s | boxes/ray | leaves/ray | tests/ray | mismatched px | depth RMSE | max depth err |\n"
@@ -177,37 +181,27 @@ static void print_row(const bench *b, const row *w)
     fflush(b->out);
 }
 
-/* The rows as CSV, written beside the target and renamed over it. */
+/* The rows as CSV. */
 static vkrt_result write_csv(const bench *b, const char *path)
 {
-    size_t n = strlen(path) + 16;
-    char *tmp = malloc(n);
-    if (!tmp) return VKRT_ERROR_OUT_OF_MEMORY;
-    snprintf(tmp, n, "%s.tmp-vkrt", path);
-    FILE *f = fopen(tmp, "w");
-    bool ok = f != NULL;
-    if (ok) {
-        fprintf(f, "scene,triangles,width,height,builder,backend,traversal,intersector,precision,build_ms,sah_cost,"
-                   "bytes_per_triangle,trace_ms,total_ms,mrays_per_s,boxes_per_ray,leaves_per_ray,tests_per_ray,"
-                   "mismatched_pixels,depth_rel_rmse,depth_rel_max\n");
-        for (unsigned i = 0; i < b->row_count; i++) {
-            const row *w = &b->rows[i];
-            const vkrt_scene_stats *s = &w->scene;
-            fprintf(f, "\"%s\",%llu,%u,%u,%s,%s,%s,%s,%s,%.4f,%.6f,%.3f,%.4f,%.4f,%.6f,%.4f,%.4f,%.4f,%llu,%.6e,%.6e\n",
-                    b->o->input ? b->o->input : "built-in", (unsigned long long)s->triangles, b->width, b->height,
-                    builder_name(w->c.builder), backend_name(w->c.backend), traversal_name(w->c.traversal),
-                    isect_name(w->c.intersector), precision_name(w->c.precision), s->build_ms, s->sah_cost,
-                    (double)(s->node_bytes + s->triangle_bytes) / (double)s->triangles, w->trace_ms, w->total_ms,
-                    w->mrays, w->nodes_per_ray, w->leaves_per_ray, w->tris_per_ray,
-                    (unsigned long long)w->mismatched, w->depth_rmse, w->depth_max);
-        }
-        ok = !ferror(f);
-        ok = fclose(f) == 0 && ok;
+    bench_csv csv;
+    vkrt_result r = bench_csv_begin(&csv, path, "scene,triangles,width,height,builder,backend,traversal,intersector,"
+                                                "precision,build_ms,sah_cost,bytes_per_triangle,trace_ms,total_ms,"
+                                                "mrays_per_s,boxes_per_ray,leaves_per_ray,tests_per_ray,"
+                                                "mismatched_pixels,depth_rel_rmse,depth_rel_max");
+    if (r != VKRT_OK) return r;
+    for (unsigned i = 0; i < b->row_count; i++) {
+        const row *w = &b->rows[i];
+        const vkrt_scene_stats *s = &w->scene;
+        fprintf(csv.f, "\"%s\",%llu,%u,%u,%s,%s,%s,%s,%s,%.4f,%.6f,%.3f,%.4f,%.4f,%.6f,%.4f,%.4f,%.4f,%llu,%.6e,%.6e\n",
+                bench_scene_name(&b->source), (unsigned long long)s->triangles, b->width, b->height,
+                builder_name(w->c.builder), backend_name(w->c.backend), traversal_name(w->c.traversal),
+                isect_name(w->c.intersector), precision_name(w->c.precision), s->build_ms, s->sah_cost,
+                (double)(s->node_bytes + s->triangle_bytes) / (double)s->triangles, w->trace_ms, w->total_ms,
+                w->mrays, w->nodes_per_ray, w->leaves_per_ray, w->tris_per_ray, (unsigned long long)w->mismatched,
+                w->depth_rmse, w->depth_max);
     }
-    if (ok) ok = rename(tmp, path) == 0;
-    if (!ok) remove(tmp);
-    free(tmp);
-    return ok ? VKRT_OK : VKRT_ERROR_IO;
+    return bench_csv_end(&csv);
 }
 
 static vkrt_result load_scenes(bench *b)
@@ -216,13 +210,11 @@ static vkrt_result load_scenes(bench *b)
         for (int m = 0; m < 2; m++) {
             vkrt_context *ctx = m ? b->cpu : b->gpu;
             if (!ctx) continue;
-            vkrt_scene_desc d = { .path = b->o->input, .keep_world_coordinates = b->o->keep_world_coordinates,
-                                  .builder = k ? VKRT_BVH_BUILDER_MIDPOINT : VKRT_BVH_BUILDER_DEFAULT };
-            vkrt_result r = vkrt_scene_create(ctx, &d, &b->scenes[k][m]);
-            if (r != VKRT_OK) {
-                snprintf(b->report->error, sizeof b->report->error, "%s", vkrt_context_last_error(ctx));
-                return r;
-            }
+            vkrt_scene_desc d = bench_scene_desc(&b->source);
+            d.builder = k ? VKRT_BVH_BUILDER_MIDPOINT : VKRT_BVH_BUILDER_DEFAULT;
+            vkrt_result r = bench_scene_create(ctx, !m, &d, &b->scenes[k][m], b->gpu_skipped, sizeof b->gpu_skipped,
+                                               b->report->error, sizeof b->report->error);
+            if (r != VKRT_OK) return r;
         }
     }
     return VKRT_OK;
@@ -265,6 +257,7 @@ static vkrt_result run_configs(bench *b)
         print_row(b, &b->rows[i]);
     }
     if (progress) fprintf(stderr, "\r%60s\r", "");
+    if (b->gpu_skipped[0]) fprintf(b->out, "\n%s\n", b->gpu_skipped);
     if (!naive)
         fprintf(b->out, "\nnaive traversal not run: %.3g ray-triangle tests per render (limit %.0e); it tests every "
                         "triangle, %llu per ray\n",
@@ -291,6 +284,7 @@ vkrt_result bench_run(const bench_options *o, bench_report *out)
         snprintf(out->error, sizeof out->error, "out of memory for %ux%u images", b.width, b.height);
         r = VKRT_ERROR_OUT_OF_MEMORY;
     }
+    if (r == VKRT_OK) r = bench_scene_init(&b.source, o, out->error, sizeof out->error);
     if (r == VKRT_OK) r = load_scenes(&b);
     const config reference = { VKRT_BVH_BUILDER_DEFAULT, VKRT_BACKEND_CPU, VKRT_TRAVERSAL_BVH,
                                VKRT_INTERSECTOR_WATERTIGHT, VKRT_PRECISION_DOUBLE };
@@ -303,6 +297,7 @@ vkrt_result bench_run(const bench_options *o, bench_report *out)
     out->validation_messages = vkrt_context_validation_messages(b.gpu) + vkrt_context_validation_messages(b.cpu);
     for (int k = 0; k < 2; k++)
         for (int m = 0; m < 2; m++) vkrt_scene_destroy(b.scenes[k][m]);
+    bench_scene_free(&b.source);
     free(b.rows);
     free(b.image);
     free(b.ref_id);

@@ -17,6 +17,8 @@ typedef struct bench_options {
                                   is ignored (see backend below) */
     vkrt_backend backend;      /* _DEFAULT: both GPU and CPU; else that one only */
     const char *input;         /* mesh file; NULL: the built-in scene */
+    uint32_t procedural;       /* > 0: instead, a procedural scene of about this many triangles
+                                  (bench_scene.h) */
     bool keep_world_coordinates;
     vkrt_camera camera;        /* zero: the default view */
     uint32_t width, height;    /* 0: 512x512 (quick: 64x64) */
@@ -25,6 +27,10 @@ typedef struct bench_options {
     FILE *out;                 /* the markdown table; NULL: stdout */
     const char *csv_path;      /* also write the rows as CSV here (atomically); NULL: no CSV */
     bool progress;             /* a progress line on stderr (a terminal) */
+    /* bench_modes_run only: */
+    uint32_t reference_spp;    /* samples per pixel of the converged references; 0: 1024
+                                  (quick: 256) */
+    const char *cache_dir;     /* where references are kept between runs; NULL: nowhere */
 } bench_options;
 
 typedef struct bench_report {

@@ -11,6 +11,10 @@
 #include <unistd.h>
 
 #include "bench.h"
+#include "bench_modes.h"
+#ifdef VKRT_HAVE_EMBREE
+#include "bench_compare.h"
+#endif
 #include "stress.h"
 #include "vkrt.h"
 
@@ -199,7 +203,8 @@ static const char stress_help[] =
     "\n";
 
 static const char bench_help[] =
-    "usage: vkrt bench [FILE] [--quick] [--csv OUT.csv] [--size WxH] [--repeat N] [options]\n"
+    "usage: vkrt bench [FILE] [--quick] [--csv OUT.csv] [--size WxH] [--repeat N]\n"
+    "                  [--compare embree | --modes [--ref-spp N] [--cache DIR]] [options]\n"
     "Renders one view of FILE (the built-in scene when none) with every configuration: backend\n"
     "(gpu, cpu), BVH builder (sah, midpoint), traversal (bvh; naive where it costs at most 1e8\n"
     "ray-triangle tests), intersector (watertight, mt) and, on the CPU, precision (float, double).\n"
@@ -214,11 +219,29 @@ static const char bench_help[] =
     "  --size WxH                512x512\n"
     "  --repeat N                5 timed renders after the warm-up\n"
     "  --backend gpu|cpu         only that backend (default: both)\n"
+    "  --compare embree          instead: the same primary and AO rays on the same triangles\n"
+    "                            through vkrt_trace_rays (both backends) and Embree 3\n"
+    "                            (rtcIntersect1, rtcOccluded1, as many threads as the CPU\n"
+    "                            backend): Mrays/s, the vkrt/Embree ratio, hit checksums and\n"
+    "                            mismatches (needs a build with libembree-dev)\n"
+    "  --modes                   instead: shaded, ao and path at 1, 4, 16, 64 spp (quick: 1, 4),\n"
+    "                            adaptive (target errors 0.1, 0.05) and with every feature\n"
+    "                            compiled in, on both backends, at 128x128 (quick: 64x64), 3\n"
+    "                            timed renders: time, samples taken, and RMSE, relMSE, PSNR\n"
+    "                            against a converged CPU reference\n"
+    "  --procedural N            instead of FILE: a rippled torus of about N triangles (the\n"
+    "                            scaling series; exactly 2*R*C, R x C quads, C = 3R)\n"
+    "  --ref-spp N               the references' samples per pixel (1024; quick: 256)\n"
+    "  --cache DIR               where references are kept between runs, keyed by scene and\n"
+    "                            settings (~/.cache/vkrt/bench; empty: nowhere)\n"
     "  --eye, --target, --up, --fov, --no-normalize, --device N, --threads N, --validation, -q\n"
     "                            as for render\n"
     "\n"
     "examples:\n"
     "  vkrt bench                                    the built-in scene, every configuration\n"
+    "  vkrt bench bunny.obj --compare embree         vkrt against Embree on the bunny\n"
+    "  vkrt bench --modes --csv modes.csv            the lighting modes' time against error\n"
+    "  vkrt bench --procedural 1000000 --backend cpu a million procedural triangles\n"
     "  vkrt bench dragon.glb --csv dragon.csv        and the rows as CSV\n"
     "  vkrt bench bunny.obj --backend gpu --size 1024x1024 --repeat 9\n"
     "\n";
@@ -256,6 +279,11 @@ typedef struct options {
     uint32_t repeat; /* timed renders after one warm-up; 0: a single render */
     bool quick;      /* stress, bench: the reduced run */
     const char *csv; /* bench: CSV output */
+    bool compare_embree; /* bench: vkrt against Embree on the same rays */
+    bool modes;          /* bench: the lighting modes against converged references */
+    uint32_t reference_spp; /* bench --modes: the references' spp; 0: the default */
+    const char *cache_dir;  /* bench --modes: --cache; NULL: the default place */
+    uint32_t procedural;    /* bench: --procedural N */
 } options;
 
 static bool parse_vec3(const char *s, float v[3])
@@ -476,6 +504,27 @@ static int parse_args(int argc, char **argv, options *o)
         } else if (!strcmp(arg, "--csv")) {
             NEED_VALUE();
             o->csv = value;
+        } else if (!strcmp(arg, "--compare")) {
+            NEED_VALUE();
+            if (strcmp(value, "embree")) return usage_error("unknown --compare '%s' (embree)", value);
+#ifndef VKRT_HAVE_EMBREE
+            return usage_error("--compare %s: this vkrt was built without Embree (install Debian's libembree-dev, "
+                               "then `meson setup --reconfigure build`)", value);
+#endif
+            o->compare_embree = true;
+        } else if (!strcmp(arg, "--procedural")) {
+            NEED_VALUE();
+            if (!parse_u32(value, &o->procedural) || o->procedural < 18 || o->procedural > 100000000)
+                return usage_error("bad --procedural '%s' (triangles, 18 to 100000000)", value);
+        } else if (!strcmp(arg, "--modes")) {
+            o->modes = true;
+        } else if (!strcmp(arg, "--ref-spp")) {
+            NEED_VALUE();
+            if (!parse_u32(value, &o->reference_spp) || !o->reference_spp || o->reference_spp > 65536)
+                return usage_error("bad --ref-spp '%s' (1 to 65536)", value);
+        } else if (!strcmp(arg, "--cache")) {
+            NEED_VALUE();
+            o->cache_dir = value;
         } else if (!strcmp(arg, "--counters")) {
             o->render.traversal_counters = true;
         } else if (!strcmp(arg, "--quick")) {
@@ -839,18 +888,41 @@ static int command_stress(options *o)
     return report.failed_rows ? EXIT_INTERNAL : EXIT_OK;
 }
 
+/* Where `bench --modes` keeps its references: --cache (empty: nowhere), else the user's cache
+ * directory, as for the pipeline cache. */
+static const char *reference_cache_dir(const options *o, char *buf, size_t size)
+{
+    if (o->cache_dir) return o->cache_dir[0] ? o->cache_dir : NULL;
+    const char *base = getenv("XDG_CACHE_HOME");
+    const char *home = getenv("HOME");
+    if (base && base[0]) snprintf(buf, size, "%s/vkrt/bench", base);
+    else if (home && home[0]) snprintf(buf, size, "%s/.cache/vkrt/bench", home);
+    else return NULL;
+    return buf;
+}
+
 static int command_bench(options *o)
 {
-    char cache_buf[4200];
+    if (o->modes && o->compare_embree) return usage_error("%s", "--modes and --compare are separate runs: give one");
+    if (o->procedural && o->input) return usage_error("--procedural replaces the FILE ('%s'): give one", o->input);
+    char cache_buf[4200], ref_buf[4200];
     bench_options bo = {
         .context = o->context, .backend = o->context.backend, .input = o->input,
-        .keep_world_coordinates = o->scene.keep_world_coordinates, .camera = o->render.camera,
+        .procedural = o->procedural, .keep_world_coordinates = o->scene.keep_world_coordinates,
+        .camera = o->render.camera,
         .width = o->render.width, .height = o->render.height, .repeat = o->repeat, .quick = o->quick,
-        .csv_path = o->csv, .progress = verbosity >= 1 && !getenv("CI"),
+        .csv_path = o->csv, .progress = verbosity >= 1 && !getenv("CI"), .reference_spp = o->reference_spp,
+        .cache_dir = reference_cache_dir(o, ref_buf, sizeof ref_buf),
     };
     bo.context.pipeline_cache_path = pipeline_cache_path(cache_buf, sizeof cache_buf);
     bench_report report;
-    vkrt_result r = bench_run(&bo, &report);
+    vkrt_result r;
+#ifdef VKRT_HAVE_EMBREE
+    if (o->compare_embree) r = bench_compare_run(&bo, &report);
+    else
+#endif
+    if (o->modes) r = bench_modes_run(&bo, &report);
+    else r = bench_run(&bo, &report);
     return suite_exit_code(o, r, report.error, report.validation_messages);
 }
 

@@ -274,6 +274,13 @@ typedef struct vkrt_scene_stats {
 
 vkrt_result vkrt_scene_stats_get(const vkrt_scene *scene, vkrt_scene_stats *out_stats);
 
+/* The triangles as the tracers see them (in the scene's traced coordinates: normalised unless
+ * keep_world_coordinates), 9 floats each (corners v0, v1, v2 as x, y, z), in prim_id order:
+ * for handing exactly the same geometry to another tracer.
+ * out_positions must hold out_floats >= 9 * vkrt_scene_stats.triangles floats (borrowed for
+ * the call). */
+vkrt_result vkrt_scene_triangles_get(const vkrt_scene *scene, float *out_positions, size_t out_floats);
+
 /* ---- rendering ---------------------------------------------------------------------- */
 
 typedef enum vkrt_mode {
@@ -483,6 +490,21 @@ typedef struct vkrt_trace_desc {
                                      blocks of rays (CPU) */
     void *progress_user;
 } vkrt_trace_desc;
+
+/* The primary rays vkrt_render() traces for an image of width x height seen by camera (NULL:
+ * the default view), one per pixel centre, rows top to bottom, bit for bit the rays of every
+ * backend's float trace (tmin = tmax = 0; dir not unit): for tracing them with vkrt_trace_rays()
+ * or handing them to another tracer. width and height must be 1 .. 65536; out_rays must hold
+ * out_count >= width * height rays (borrowed for the call). A bad camera fails as in
+ * vkrt_render(). */
+vkrt_result vkrt_camera_rays(vkrt_context *ctx, const vkrt_camera *camera, uint32_t width, uint32_t height,
+                             vkrt_ray *out_rays, size_t out_count);
+
+/* The origin of a secondary ray leaving the surface point p on the side of normal n, as the
+ * lighting modes offset theirs (Waechter and Binder 2019: a fixed number of ulps along n, so
+ * the ray cannot hit the surface it leaves yet starts as near it as float allows). n must be
+ * the unit geometric normal turned to the side the ray leaves from. */
+void vkrt_ray_offset(const float p[3], const float n[3], float out_origin[3]);
 
 /* Traces `count` rays (borrowed for the call) and writes their closest hits to out_hits
  * (count entries). Closest-hit ties break towards the lower prim_id, so every traversal and

@@ -493,6 +493,44 @@ done:
     vkrt_context_destroy(ctx);
 }
 
+/* The helpers that hand vkrt's rays and triangles to another tracer check their buffers. */
+static void export_misuse_returns_invalid_argument(void)
+{
+    vkrt_context *ctx = NULL;
+    CHECK(vkrt_context_create(&(vkrt_context_desc){ .backend = VKRT_BACKEND_CPU }, &ctx) == VKRT_OK);
+    vkrt_scene *s = NULL;
+    if (ctx) CHECK(vkrt_scene_create(ctx, NULL, &s) == VKRT_OK);
+    if (!s) goto done;
+    vkrt_scene_stats st;
+    vkrt_scene_stats_get(s, &st);
+    size_t n = st.triangles * 9;
+    float *tris = malloc(n * sizeof *tris);
+    if (!tris) abort();
+    CHECK(vkrt_scene_triangles_get(s, tris, n) == VKRT_OK);
+    CHECK(vkrt_scene_triangles_get(NULL, tris, n) == VKRT_ERROR_INVALID_ARGUMENT);
+    CHECK(vkrt_scene_triangles_get(s, NULL, n) == VKRT_ERROR_INVALID_ARGUMENT);
+    CHECK(vkrt_scene_triangles_get(s, tris, n - 1) == VKRT_ERROR_INVALID_ARGUMENT);
+    CHECK(strstr(vkrt_context_last_error(ctx), "out_positions") != NULL);
+    free(tris);
+    vkrt_ray rays[6];
+    CHECK(vkrt_camera_rays(ctx, NULL, 3, 2, rays, 6) == VKRT_OK);
+    CHECK(rays[0].tmin == 0.0f && rays[0].tmax == 0.0f && rays[0].origin[2] == 1.5f); /* the default eye */
+    CHECK(vkrt_camera_rays(NULL, NULL, 3, 2, rays, 6) == VKRT_ERROR_INVALID_ARGUMENT);
+    CHECK(vkrt_camera_rays(ctx, NULL, 3, 2, NULL, 6) == VKRT_ERROR_INVALID_ARGUMENT);
+    CHECK(vkrt_camera_rays(ctx, NULL, 3, 2, rays, 5) == VKRT_ERROR_INVALID_ARGUMENT);
+    CHECK(vkrt_camera_rays(ctx, NULL, 0, 2, rays, 6) == VKRT_ERROR_INVALID_ARGUMENT);
+    CHECK(vkrt_camera_rays(ctx, NULL, 70000, 1, rays, 6) == VKRT_ERROR_INVALID_ARGUMENT);
+    CHECK(vkrt_camera_rays(ctx, &(vkrt_camera){ .fov_y_degrees = 180 }, 3, 2, rays, 6) == VKRT_ERROR_INVALID_ARGUMENT);
+    CHECK(strstr(vkrt_context_last_error(ctx), "fov") != NULL);
+    /* The offset moves a point off its surface along the normal, and only along it. */
+    float o[3];
+    vkrt_ray_offset((const float[3]){ 1.0f, 0.0f, -2.0f }, (const float[3]){ 0.0f, 1.0f, 0.0f }, o);
+    CHECK(o[0] == 1.0f && o[1] > 0.0f && o[2] == -2.0f);
+done:
+    vkrt_scene_destroy(s);
+    vkrt_context_destroy(ctx);
+}
+
 static bool gpu_available(void)
 {
     vkrt_context *ctx = NULL;
@@ -517,6 +555,7 @@ int main(void)
     RUN(context_misuse_returns_invalid_argument);
     RUN(scene_misuse_returns_the_exact_code);
     RUN(render_and_save_misuse_return_invalid_argument);
+    RUN(export_misuse_returns_invalid_argument);
     RUN(out_of_memory_at_every_cpu_allocation);
     if (gpu_available()) RUN(out_of_memory_at_every_gpu_allocation);
     rmdir(save_dir);

@@ -3,7 +3,8 @@
 # files, `info` and `devices`, and every kind of bad input answered with a message naming the
 # file, the documented exit code and no output file.
 set -u
-vkrt=${1:?usage: test_cli.sh path/to/vkrt}
+vkrt=${1:?usage: test_cli.sh path/to/vkrt [embree|no-embree]}
+embree=${2:-no-embree} # whether the build has Embree (bench --compare embree)
 models=../shared/models
 tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
@@ -120,6 +121,103 @@ for r in rows:
 PY
 then ok "bench CSV: 18 configurations, finite figures, the reference row exact"; else bad "bench CSV: 18 configurations, finite figures, the reference row exact"; fi
 expect "bench with a FILE that does not exist fails as input" 3 "$vkrt" bench "$tmp/missing.obj" --quick
+expect "bench --compare with an unknown engine is a usage error" 2 "$vkrt" bench --quick --compare nothing
+# bench --modes: the lighting modes against converged references kept in a cache; a second run
+# reads them back and measures the same errors. Errors finite (PSNR infinite only where the
+# image is exact), timings unchecked.
+expect "bench --quick --modes --csv" 0 "$vkrt" bench --quick --modes --cache "$tmp/refs" --csv "$tmp/modes.csv"
+cp "$tmp/out" "$tmp/modes.md"
+expect "bench --quick --modes from the cache" 0 "$vkrt" bench --quick --modes --backend cpu --cache "$tmp/refs" \
+  --csv "$tmp/modes_cpu.csv"
+if python3 - "$tmp/modes.csv" "$tmp/modes.md" "$tmp/modes_cpu.csv" "$tmp/out" "$tmp/refs" <<'PY'
+import csv, math, os, sys
+rows = list(csv.DictReader(open(sys.argv[1])))
+table = [l for l in open(sys.argv[2]) if l.startswith("| ") and not l.startswith("| mode")]
+# per mode and backend: spp 1 and 4, two adaptive targets, every feature compiled in
+assert len(rows) == len(table) == 3 * 2 * 5, (len(rows), len(table))
+keys = {(r["mode"], r["backend"], r["spp"], r["target_error"], r["features"]) for r in rows}
+assert len(keys) == 30, keys
+for r in rows:
+    for k in ("trace_ms", "total_ms", "mrays_per_s", "spp_taken", "rmse", "rel_mse", "reference_noise"):
+        v = float(r[k])
+        assert math.isfinite(v) and v >= 0, (k, r)
+    assert float(r["trace_ms"]) > 0 and int(r["reference_spp"]) == 256, r
+    psnr = float(r["psnr_db"])
+    assert (math.isinf(psnr) and float(r["rmse"]) == 0) or (math.isfinite(psnr) and psnr > 0), r
+    assert 1 <= float(r["spp_taken"]) <= int(r["spp"]), r
+    if r["mode"] != "shaded":  # shaded under the default rig is exact at one sample
+        assert 0 < float(r["rmse"]) < 0.5, r
+# more samples, less error: each backend's 4 spp row beats its 1 spp row
+err = {(r["mode"], r["backend"], r["spp"]): float(r["rmse"]) for r in rows if r["features"] == "specialised"
+       and float(r["target_error"]) == 0}
+for mode in ("ao", "path"):
+    for b in ("gpu", "cpu"):
+        assert err[(mode, b, "4")] < err[(mode, b, "1")], (mode, b, err)
+# the second run read all three references from the cache and measured the same errors
+header = open(sys.argv[4]).read()
+assert header.count("read from the cache") == 3, header
+assert len([f for f in os.listdir(sys.argv[5]) if f.startswith("ref-")]) == 3, os.listdir(sys.argv[5])
+again = {(r["mode"], r["spp"], r["target_error"], r["features"]): r["rmse"] for r in csv.DictReader(open(sys.argv[3]))}
+for r in rows:
+    if r["backend"] == "cpu":
+        assert again[(r["mode"], r["spp"], r["target_error"], r["features"])] == r["rmse"], r
+PY
+then ok "bench --modes CSV: 30 rows, finite errors falling with spp, references cached"
+else bad "bench --modes CSV: 30 rows, finite errors falling with spp, references cached"; fi
+# bench --procedural N: the scaling series' scene, named by its exact triangle count
+expect "bench --quick --procedural" 0 "$vkrt" bench --quick --procedural 2000 --backend cpu --csv "$tmp/proc.csv"
+if python3 - "$tmp/proc.csv" <<'PY'
+import csv, sys
+rows = list(csv.DictReader(open(sys.argv[1])))
+assert rows and all(r["scene"] == "procedural-" + r["triangles"] for r in rows), rows[0]
+assert abs(int(rows[0]["triangles"]) - 2000) < 200 and all(int(r["mismatched_pixels"]) == 0 for r in rows), rows
+PY
+then ok "bench --procedural: about N triangles, named by the count, no mismatched pixel"
+else bad "bench --procedural: about N triangles, named by the count, no mismatched pixel"; fi
+expect "bench --procedural with a FILE is a usage error" 2 "$vkrt" bench "$models/meshes/bunny.obj" --procedural 2000
+expect "bench --modes with --compare is a usage error" 2 "$vkrt" bench --quick --modes --compare embree
+expect "bench --ref-spp 0 is a usage error" 2 "$vkrt" bench --quick --modes --ref-spp 0
+# bench --compare embree: the same rays through Embree and vkrt's backends, every query; the
+# checksums agree and (nearly) every ray gets the same answer. Timings are not checked.
+if [ "$embree" = embree ]; then
+  expect "bench --quick --compare embree --csv" 0 "$vkrt" bench --quick --compare embree --csv "$tmp/embree.csv"
+  if python3 - "$tmp/embree.csv" "$tmp/out" <<'PY'
+import csv, math, sys
+rows = list(csv.DictReader(open(sys.argv[1])))
+table = [l for l in open(sys.argv[2]) if l.startswith("| ") and not l.startswith("| rays")]
+assert len(rows) == len(table) == 9, (len(rows), len(table))
+assert {(r["rays"], r["query"], r["engine"]) for r in rows} == \
+    {(s, q, e) for s, q in (("primary", "closest"), ("ao", "closest"), ("ao", "any"))
+     for e in ("embree", "vkrt-cpu", "vkrt-gpu")}, rows
+ref = {(r["rays"], r["query"]): r for r in rows if r["engine"] == "embree"}
+for r in rows:
+    for k in ("build_ms", "bytes_per_triangle", "trace_ms", "mrays_per_s", "ratio_to_embree", "t_rel_max"):
+        v = float(r[k])
+        assert math.isfinite(v) and v >= 0, (k, r)
+    assert float(r["trace_ms"]) > 0 and float(r["bytes_per_triangle"]) > 0, r
+    e = ref[(r["rays"], r["query"])]
+    n, hits = int(r["ray_count"]), int(r["hits"])
+    assert n == int(e["ray_count"]) and n > 0, r
+    assert abs(hits - int(e["hits"])) <= 2 + n // 1000, (r, e)
+    assert int(r["mismatches"]) <= 2 + n // 1000, r
+    if r["query"] == "closest":
+        assert abs(float(r["sum_t"]) - float(e["sum_t"])) <= 1e-4 * float(e["sum_t"]), (r, e)
+        assert float(r["t_rel_max"]) < 1e-2, r
+    else:
+        assert r["sum_t"] == "", r
+    if r["engine"] == "embree":
+        assert float(r["ratio_to_embree"]) == 1 and int(r["mismatches"]) == 0, r
+primary = ref[("primary", "closest")]
+assert int(primary["ray_count"]) == 64 * 64 and int(ref[("ao", "closest")]["ray_count"]) == 4 * int(primary["hits"])
+PY
+  then ok "bench --compare embree CSV: 9 rows, Embree's checksums met by both backends"
+  else bad "bench --compare embree CSV: 9 rows, Embree's checksums met by both backends"; fi
+else
+  "$vkrt" bench --quick --compare embree >"$tmp/out" 2>"$tmp/err"
+  got=$?
+  if [ "$got" -eq 2 ] && grep -q 'built without Embree' "$tmp/err"; then ok "bench --compare embree without Embree: a usage error"
+  else bad "bench --compare embree without Embree: a usage error (exit $got)"; fi
+fi
 expect "render glb with camera flags" 0 "$vkrt" render "$models/gltf/draco/Box/Box.glb" --eye 1,1,1.5 --target 0,0,0 --up 0,1,0 --fov 60 -o "$tmp/box.ppm" --size 32x24
 if head -c 2 "$tmp/box.ppm" 2>/dev/null | grep -q P6; then ok "PPM output"; else bad "PPM output"; fi
 

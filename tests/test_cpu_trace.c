@@ -854,6 +854,11 @@ static void cpu_secondary_rays_never_rehit_their_own_triangle(void)
     check_no_self_intersection_on(cpu, "cpu");
 }
 
+static void cpu_camera_rays_hit_what_the_render_shows_on_exported_triangles(void)
+{
+    check_camera_rays_and_triangles_on(cpu, "cpu");
+}
+
 /* Rays in random directions from random points of the scene's box, into shared meshes: the
  * double reference and float agree on nearly every prim_id, and each precision's BVH and naive
  * traversal agree exactly. */
@@ -992,6 +997,7 @@ int main(void)
     RUN(cpu_grazing_hit_distances_are_exact);
     RUN(texture_halves_round_trip_and_wraps_follow_their_modes);
     RUN(cpu_secondary_rays_never_rehit_their_own_triangle);
+    RUN(cpu_camera_rays_hit_what_the_render_shows_on_exported_triangles);
     vkrt_context_destroy(cpu);
     return check_exit();
 }

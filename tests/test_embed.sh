@@ -4,7 +4,8 @@
 #  1. installed: `meson install --destdir` of this build tree, then the example compiled with
 #     `pkg-config --static` from the installed vkrt.pc, run, and its PNG checked;
 #  2. meson subproject: a throwaway parent project whose subprojects/vkrt links to this source
-#     tree, dependency('vkrt', fallback: ['vkrt', 'vkrt_dep']), tests of vkrt off.
+#     tree, dependency('vkrt', fallback: ['vkrt', 'vkrt_dep']), tests of vkrt and Embree off
+#     (whose command line then refuses `bench --compare embree`).
 # Usage: test_embed.sh SOURCE_ROOT BUILD_ROOT VKRT_EXE B_SANITIZE
 set -u
 src=${1:?usage: test_embed.sh SOURCE_ROOT BUILD_ROOT VKRT_EXE B_SANITIZE}
@@ -83,7 +84,7 @@ ln -s "$src" "$parent/subprojects/vkrt"
 cp "$src/examples/embed.c" "$parent/"
 cat >"$parent/meson.build" <<'EOF'
 project('parent', 'c', default_options: ['c_std=c11'])
-vkrt_dep = dependency('vkrt', fallback: ['vkrt', 'vkrt_dep'], default_options: ['tests=false'])
+vkrt_dep = dependency('vkrt', fallback: ['vkrt', 'vkrt_dep'], default_options: ['tests=false', 'embree=disabled'])
 executable('embed', 'embed.c', dependencies: vkrt_dep)
 EOF
 if meson setup "$parent/build" "$parent" -Dbuildtype=release --force-fallback-for=vkrt >"$tmp/log" 2>&1 \
@@ -91,6 +92,14 @@ if meson setup "$parent/build" "$parent" -Dbuildtype=release --force-fallback-fo
   ok "subproject: the parent project builds embed.c"
   if grep -q 'tests/test_' "$parent/build/build.ninja"; then bad "subproject: vkrt's tests were configured"; else ok "subproject: vkrt's tests are off"; fi
   run_example subproject "$parent/build/embed"
+  # Built without Embree (embree=disabled), the command line refuses the comparison as a usage
+  # error that says why.
+  if ninja -C "$parent/build" -j2 subprojects/vkrt/vkrt >"$tmp/log" 2>&1; then
+    "$parent/build/subprojects/vkrt/vkrt" bench --quick --compare embree >"$tmp/log" 2>&1
+    got=$?
+    if [ "$got" -eq 2 ] && grep -q 'built without Embree' "$tmp/log"; then ok "without Embree, bench --compare embree is a usage error (exit 2)"
+    else bad "without Embree, bench --compare embree is a usage error (exit $got)"; fi
+  else bad "subproject: vkrt without Embree builds"; fi
 else bad "subproject: the parent project builds embed.c"; fi
 
 echo "$passed passed, $failed failed"

@@ -6,6 +6,7 @@
 
 #include "check.h"
 #include "context.h"
+#include "ray_offset.h"
 #include "shaders_embedded.h"
 #include "trace_fixtures.h"
 #include "vk_buffer.h"
@@ -541,6 +542,11 @@ static void gpu_secondary_rays_never_rehit_their_own_triangle(void)
     check_no_self_intersection_on(gpu, "gpu");
 }
 
+static void gpu_camera_rays_hit_what_the_render_shows_on_exported_triangles(void)
+{
+    check_camera_rays_and_triangles_on(gpu, "gpu");
+}
+
 /* ---- traversals longer than lavapipe's loop limit (65,535 iterations per SIMD group) ---- */
 
 /* A scene of its own positions and indices, in world coordinates. */
@@ -1062,6 +1068,7 @@ int main(void)
     RUN(gpu_eye_inside_a_closed_mesh_always_hits);
     RUN(gpu_grazing_hit_distances_are_exact);
     RUN(gpu_secondary_rays_never_rehit_their_own_triangle);
+    RUN(gpu_camera_rays_hit_what_the_render_shows_on_exported_triangles);
     RUN(gpu_traversals_beyond_the_loop_limit_match_cpu);
     RUN(gpu_image_beyond_the_loop_limit_matches_cpu);
     RUN(gpu_traversal_counters_sum_the_heatmap);

@@ -1,8 +1,9 @@
 /* Ray tests that run on any backend through vkrt.h, shared by test_cpu_trace.c (CPU float and
  * double) and test_gpu.c (GPU): a closed icosphere built in memory, rays aimed exactly at its
  * shared edges and vertices (watertightness), the documented miss rules of vkrt_trace_rays,
- * +0/-0 direction components, and secondary rays spawned with ray_offset() that must never
- * re-hit their own triangle. Include after check.h. */
+ * +0/-0 direction components, secondary rays spawned with vkrt_ray_offset() that must never
+ * re-hit their own triangle, and the camera rays and triangles the API hands to other tracers.
+ * Include after check.h. */
 #ifndef VKRT_TRACE_FIXTURES_H
 #define VKRT_TRACE_FIXTURES_H
 
@@ -11,7 +12,6 @@
 #include <string.h>
 
 #include "check.h"
-#include "ray_offset.h"
 #include "vkrt.h"
 
 /* ---- random numbers (splitmix64: reproducible on every platform) ---- */
@@ -345,7 +345,7 @@ static inline void check_ray_rules_on(vkrt_context *ctx, vkrt_precision precisio
 /* ---- self-intersection ---- */
 
 /* Spawns secondary rays from the hits of primary rays into icospheres scaled 1e-6..1e6 and
- * translated up to 1e6: origin ray_offset(hit point, face normal turned towards the new ray),
+ * translated up to 1e6: origin vkrt_ray_offset(hit point, face normal turned towards the new ray),
  * direction random in that hemisphere (reflection-like) or the other (transmission-like, the
  * offset then along the reversed normal). None may hit its own triangle. */
 static inline void check_no_self_intersection_on(vkrt_context *ctx, const char *label)
@@ -387,8 +387,8 @@ static inline void check_no_self_intersection_on(vkrt_context *ctx, const char *
                 const float *v0 = m.positions + tri[0] * 3, *v1 = m.positions + tri[1] * 3, *v2 = m.positions + tri[2] * 3;
                 /* The hit point as a float renderer computes it, from the barycentrics. */
                 float w = 1.0f - ph[i].u - ph[i].v;
-                vkrt_float3 p = { v0[0] * w + v1[0] * ph[i].u + v2[0] * ph[i].v, v0[1] * w + v1[1] * ph[i].u + v2[1] * ph[i].v,
-                                  v0[2] * w + v1[2] * ph[i].u + v2[2] * ph[i].v };
+                const float p[3] = { v0[0] * w + v1[0] * ph[i].u + v2[0] * ph[i].v, v0[1] * w + v1[1] * ph[i].u + v2[1] * ph[i].v,
+                                     v0[2] * w + v1[2] * ph[i].u + v2[2] * ph[i].v };
                 double e1[3], e2[3], nd[3];
                 for (int a = 0; a < 3; a++) e1[a] = (double)v1[a] - v0[a], e2[a] = (double)v2[a] - v0[a];
                 nd[0] = e1[1] * e2[2] - e1[2] * e2[1], nd[1] = e1[2] * e2[0] - e1[0] * e2[2], nd[2] = e1[0] * e2[1] - e1[1] * e2[0];
@@ -405,9 +405,9 @@ static inline void check_no_self_intersection_on(vkrt_context *ctx, const char *
                     if (side == 0.0) continue;
                     if (side < 0)
                         for (int a = 0; a < 3; a++) d[a] = -d[a];
-                    vkrt_float3 nrm = { (float)(sign * nd[0]), (float)(sign * nd[1]), (float)(sign * nd[2]) };
-                    vkrt_float3 o = ray_offset(p, nrm);
-                    secondary[n] = (vkrt_ray){ .origin = { o.x, o.y, o.z }, .dir = { (float)d[0], (float)d[1], (float)d[2] } };
+                    const float nrm[3] = { (float)(sign * nd[0]), (float)(sign * nd[1]), (float)(sign * nd[2]) };
+                    secondary[n] = (vkrt_ray){ .dir = { (float)d[0], (float)d[1], (float)d[2] } };
+                    vkrt_ray_offset(p, nrm, secondary[n].origin);
                     own[n++] = ph[i].prim_id;
                 }
             }
@@ -430,6 +430,59 @@ static inline void check_no_self_intersection_on(vkrt_context *ctx, const char *
             closed_mesh_free(&m);
         }
     fprintf(stderr, "  %s: %zu secondary rays, %zu hit their own triangle\n", label, total_spawned, self_hits);
+}
+
+/* ---- what other tracers are handed: camera rays and triangles ---- */
+
+/* vkrt_camera_rays() traced with vkrt_trace_rays() hit the triangles an id render shows, pixel
+ * for pixel, and each hit lies on the triangle vkrt_scene_triangles_get() gives for its prim_id
+ * (the same traced coordinates, in prim_id order): the built-in scene, a view of its own. */
+static inline void check_camera_rays_and_triangles_on(vkrt_context *ctx, const char *label)
+{
+    enum { W = 40, H = 30 };
+    const vkrt_camera cam = { .eye = { 0.8f, 0.4f, 1.2f }, .fov_y_degrees = 50.0f };
+    vkrt_scene *s = NULL;
+    CHECK_MSG(vkrt_scene_create(ctx, &(vkrt_scene_desc){ 0 }, &s) == VKRT_OK, "%s: %s", label, vkrt_context_last_error(ctx));
+    if (!s) return;
+    vkrt_scene_stats st;
+    vkrt_scene_stats_get(s, &st);
+    float *id = malloc(vkrt_render_floats(W, H) * sizeof *id), *tris = malloc(st.triangles * 9 * sizeof *tris);
+    vkrt_ray *rays = malloc(W * H * sizeof *rays);
+    if (!id || !tris || !rays) abort();
+    vkrt_render_desc rd = { .width = W, .height = H, .camera = cam, .mode = VKRT_MODE_ID };
+    CHECK(vkrt_render(ctx, s, &rd, id, vkrt_render_floats(W, H), NULL) == VKRT_OK);
+    CHECK(vkrt_camera_rays(ctx, &cam, W, H, rays, W * H) == VKRT_OK);
+    CHECK(vkrt_scene_triangles_get(s, tris, st.triangles * 9) == VKRT_OK);
+    vkrt_hit *h = trace_all(ctx, s, NULL, rays, W * H);
+    size_t same = 0, hits = 0, on_triangle = 0;
+    for (size_t i = 0; i < W * H; i++) {
+        same += id[4 * i] == (h[i].prim_id == VKRT_NO_HIT ? -1.0f : (float)h[i].prim_id);
+        if (h[i].prim_id == VKRT_NO_HIT) continue;
+        hits++;
+        /* The hit point from t against the one from the barycentrics on the exported corners. */
+        const float *v = tris + (size_t)h[i].prim_id * 9;
+        double w = 1.0 - h[i].u - h[i].v, worst = 0.0;
+        for (int a = 0; a < 3; a++) {
+            double from_t = rays[i].origin[a] + (double)h[i].t * rays[i].dir[a];
+            double from_uv = w * v[a] + h[i].u * v[3 + a] + h[i].v * v[6 + a];
+            worst = fmax(worst, fabs(from_t - from_uv));
+        }
+        on_triangle += worst < 1e-5;
+    }
+    CHECK_MSG(same == W * H, "%s: camera rays hit the id render's triangle on %zu of %d pixels", label, same, W * H);
+    CHECK_MSG(hits > W * H / 8 && on_triangle == hits, "%s: %zu of %zu hits lie on their exported triangle", label,
+              on_triangle, hits);
+    /* Every exported corner inside the scene's bounds. */
+    size_t outside = 0;
+    for (size_t k = 0; k < st.triangles * 3; k++)
+        for (int a = 0; a < 3; a++)
+            outside += tris[3 * k + a] < st.bounds_min[a] || tris[3 * k + a] > st.bounds_max[a];
+    CHECK_MSG(outside == 0, "%s: %zu exported coordinates outside the scene bounds", label, outside);
+    free(h);
+    free(rays);
+    free(tris);
+    free(id);
+    vkrt_scene_destroy(s);
 }
 
 /* Rays grazing one large triangle in the plane y = 0 at 1e-1 ... 1e-4 radians: the float
