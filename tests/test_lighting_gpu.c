@@ -23,6 +23,15 @@ static vkrt_scene *builtin(vkrt_context *ctx)
     return s;
 }
 
+/* The images and error maps of one GPU-against-CPU comparison. */
+static void free_pair(float *g, float *c, float *ge, float *ce)
+{
+    free(g);
+    free(c);
+    free(ge);
+    free(ce);
+}
+
 /* Per pixel and channel, |gpu - cpu| within 4 combined standard errors (luminance errors
  * scaled to the channel) plus float slack; at most 0.5% of the pixels may exceed it. */
 static void compare_statistically(const char *what, const float *g, const float *ge, const float *c, const float *ce,
@@ -84,10 +93,7 @@ static void gpu_lighting_matches_cpu_statistically(void)
                       "%s: bounce rays %llu vs %llu", what, (unsigned long long)gs.bounce_rays,
                       (unsigned long long)cs.bounce_rays);
         }
-        free(g);
-        free(c);
-        free(ge);
-        free(ce);
+        free_pair(g, c, ge, ce);
     }
     vkrt_scene_destroy(sg);
     vkrt_scene_destroy(sc);
@@ -129,10 +135,7 @@ static void gpu_scene_lights_and_textures_match_cpu(void)
             for (size_t i = 0; i < 24 * 24; i++) sum += g[i * 4] + g[i * 4 + 1] + g[i * 4 + 2];
             CHECK_MSG(sum > 0.0, "%s: black", files[f].path);
         }
-        free(g);
-        free(c);
-        free(ge);
-        free(ce);
+        free_pair(g, c, ge, ce);
         vkrt_scene_destroy(sg);
         vkrt_scene_destroy(sc);
     }

@@ -81,17 +81,23 @@ static vkrt_scene *scene_with_limit(const char *path, VkDeviceSize limit)
     return s;
 }
 
-static float *render(vkrt_context *ctx, vkrt_scene *s, const vkrt_render_desc *d)
+/* Renders d (stats may be NULL); NULL on failure, which is a failed check. */
+static float *render_stats(vkrt_context *ctx, vkrt_scene *s, const vkrt_render_desc *d, vkrt_render_stats *st)
 {
     size_t n = vkrt_render_floats(d->width, d->height);
     float *rgba = malloc(n * sizeof *rgba);
-    vkrt_result r = rgba ? vkrt_render(ctx, s, d, rgba, n, NULL) : VKRT_ERROR_OUT_OF_MEMORY;
+    vkrt_result r = rgba ? vkrt_render(ctx, s, d, rgba, n, st) : VKRT_ERROR_OUT_OF_MEMORY;
     CHECK_MSG(r == VKRT_OK, "render (mode %d): %s", (int)d->mode, vkrt_context_last_error(ctx));
     if (r != VKRT_OK) {
         free(rgba);
         return NULL;
     }
     return rgba;
+}
+
+static float *render(vkrt_context *ctx, vkrt_scene *s, const vkrt_render_desc *d)
+{
+    return render_stats(ctx, s, d, NULL);
 }
 
 /* The same render of the split and the one-buffer scene, bit for bit. */
@@ -332,19 +338,6 @@ static void ten_million_triangles_match_the_cpu_reference(void)
 }
 
 /* ---- bounded submissions ---- */
-
-static float *render_stats(vkrt_context *ctx, vkrt_scene *s, const vkrt_render_desc *d, vkrt_render_stats *st)
-{
-    size_t n = vkrt_render_floats(d->width, d->height);
-    float *rgba = malloc(n * sizeof *rgba);
-    vkrt_result r = rgba ? vkrt_render(ctx, s, d, rgba, n, st) : VKRT_ERROR_OUT_OF_MEMORY;
-    CHECK_MSG(r == VKRT_OK, "render (mode %d): %s", (int)d->mode, vkrt_context_last_error(ctx));
-    if (r != VKRT_OK) {
-        free(rgba);
-        return NULL;
-    }
-    return rgba;
-}
 
 /* With a target of a nanosecond every submission shrinks to one 8x8 workgroup (and naive
  * traversal to one chunk of triangles per submission): primary modes with both traversals
