@@ -102,6 +102,23 @@ def error_vs_time(modes, path):
     plt.close(fig)
 
 
+def procedural(r):
+    return r["scene"].startswith("procedural-")
+
+
+def plot_series(ax, rows, x, y, colour, label, style="-", marker="o"):
+    """The procedural series as a line (one shape at every size), the meshes as points beside it:
+    different shapes, so a line through them would draw the shapes' differences as a trend."""
+    series = [r for r in rows if procedural(r)]
+    meshes = [r for r in rows if not procedural(r)]
+    if series:
+        ax.plot([x(r) for r in series], [y(r) for r in series], style, marker=marker, color=colour,
+                label=f"{label}, procedural")
+    if meshes:
+        ax.plot([x(r) for r in meshes], [y(r) for r in meshes], linestyle="", marker=marker, markerfacecolor="none",
+                color=colour, label=f"{label}, meshes")
+
+
 def default_rows(bench, backend, traversal="bvh", builder="sah", precision="float"):
     out = [r for r in bench if (r["builder"], r["backend"], r["traversal"], r["intersector"], r["precision"]) ==
            (builder, backend, traversal, "watertight", precision)]
@@ -115,9 +132,9 @@ def mrays_vs_triangles(bench, path):
             rs = default_rows(bench, backend, traversal)
             if not rs:
                 continue
-            ax.plot([int(r["triangles"]) for r in rs], [float(r["mrays_per_s"]) for r in rs], style, marker="o",
-                    color=colour, label=f"{backend} {traversal}")
-            for r in rs if traversal == "bvh" and backend == "cpu" else []:
+            plot_series(ax, rs, lambda r: int(r["triangles"]), lambda r: float(r["mrays_per_s"]), colour,
+                        f"{backend} {traversal}", style)
+            for r in [r for r in rs if not procedural(r)] if traversal == "bvh" and backend == "cpu" else []:
                 ax.annotate(scene_name(r["scene"]), (int(r["triangles"]), float(r["mrays_per_s"])), fontsize=6,
                             xytext=(3, 3), textcoords="offset points")
     ax.set_xscale("log")
@@ -126,7 +143,7 @@ def mrays_vs_triangles(bench, path):
     ax.set_ylabel("Mrays/s (log)")
     ax.set_title("Primary rays, SAH BVH (watertight, float) against naive traversal", fontsize=10)
     ax.grid(True, which="both", linewidth=0.3, alpha=0.5)
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(path, dpi=DPI)
     plt.close(fig)
@@ -136,19 +153,17 @@ def builders(bench, embree, path):
     fig, (left, right) = plt.subplots(1, 2, figsize=(10, 4))
     for builder, colour in (("sah", "tab:blue"), ("midpoint", "tab:gray")):
         rs = default_rows(bench, "cpu", builder=builder)
-        n = [int(r["triangles"]) for r in rs]
-        left.plot(n, [float(r["build_ms"]) for r in rs], marker="o", color=colour, label=f"vkrt {builder}")
-        right.plot(n, [float(r["sah_cost"]) for r in rs], marker="o", color=colour, label=f"vkrt {builder}")
+        plot_series(left, rs, lambda r: int(r["triangles"]), lambda r: float(r["build_ms"]), colour, f"vkrt {builder}")
+        plot_series(right, rs, lambda r: int(r["triangles"]), lambda r: float(r["sah_cost"]), colour, f"vkrt {builder}")
     rs = sorted([r for r in embree if r["engine"] == "embree" and r["rays"] == "primary"], key=lambda r: int(r["triangles"]))
     if rs:
-        threads = rs[0]["threads"]
-        left.plot([int(r["triangles"]) for r in rs], [float(r["build_ms"]) for r in rs], marker="^", color="tab:red",
-                  label=f"Embree 3 medium ({threads} threads)")
+        plot_series(left, rs, lambda r: int(r["triangles"]), lambda r: float(r["build_ms"]), "tab:red",
+                    f"Embree 3 medium, {rs[0]['threads']} threads", marker="^")
     for ax in (left, right):
         ax.set_xscale("log")
         ax.set_xlabel("triangles (log)")
         ax.grid(True, which="both", linewidth=0.3, alpha=0.5)
-        ax.legend(fontsize=8)
+        ax.legend(fontsize=7)
     left.set_yscale("log")
     left.set_ylabel("build ms (log)")
     left.set_title("BVH build time", fontsize=10)
@@ -164,7 +179,7 @@ def embree_ratio(embree, path):
     series = [(rays, query, engine) for rays, query in (("primary", "closest"), ("ao", "closest"), ("ao", "any"))
               for engine in ("vkrt-cpu", "vkrt-gpu")]
     colours = ["tab:red", "tab:purple", "salmon", "plum", "darkred", "indigo"]
-    fig, ax = plt.subplots(figsize=(max(6.4, 1.3 * len(scenes) + 2), 4.2))
+    fig, ax = plt.subplots(figsize=(min(12.0, max(6.4, 0.9 * len(scenes) + 2)), 4.6))
     width = 0.8 / len(series)
     for k, (key, colour) in enumerate(zip(series, colours)):
         vals = []
@@ -175,12 +190,13 @@ def embree_ratio(embree, path):
                label=f"{key[2]} {key[0]} {key[1]}")
     ax.axhline(1.0, color="black", linewidth=0.8)
     ax.set_xticks(range(len(scenes)))
-    ax.set_xticklabels([f"{scene_name(s)}\n{next(r for r in embree if r['scene'] == s)['triangles']}" for s in scenes],
-                       fontsize=7)
+    ax.set_xticklabels([f"{scene_name(s)}\n{next(r for r in embree if r['scene'] == s)['triangles']} tris"
+                        for s in scenes], fontsize=7, rotation=25, ha="right")
     ax.set_ylabel("vkrt Mrays/s / Embree Mrays/s")
     threads = embree[0]["threads"] if embree else "?"
     ax.set_title(f"vkrt against Embree 3 on the same rays ({threads} threads; 1 = as fast)", fontsize=10)
-    ax.legend(fontsize=7, ncol=3)
+    ax.legend(fontsize=7, ncol=6, loc="upper center", bbox_to_anchor=(0.5, -0.3), frameon=False)
+    ax.set_ylim(0, max(1.1, ax.get_ylim()[1]))
     ax.grid(True, axis="y", linewidth=0.3, alpha=0.5)
     fig.tight_layout()
     fig.savefig(path, dpi=DPI)

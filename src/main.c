@@ -241,7 +241,7 @@ static const char bench_help[] =
     "  vkrt bench                                    the built-in scene, every configuration\n"
     "  vkrt bench bunny.obj --compare embree         vkrt against Embree on the bunny\n"
     "  vkrt bench --modes --csv modes.csv            the lighting modes' time against error\n"
-    "  vkrt bench --procedural 1000000 --backend cpu a million procedural triangles\n"
+    "  vkrt bench --procedural 1000000               a million procedural triangles\n"
     "  vkrt bench dragon.glb --csv dragon.csv        and the rows as CSV\n"
     "  vkrt bench bunny.obj --backend gpu --size 1024x1024 --repeat 9\n"
     "\n";
