@@ -261,7 +261,8 @@ void stage_finish()
     a.lum_sq_sum += lum * lum;
     a.alpha = primary_hit ? 1.0 : 0.0;
     if (!primary_hit) a.done = 1u;
-    if ((FEATURES & VKRT_GPU_FEATURE_ADAPTIVE) != 0u && a.samples >= 8u) {
+    /* A target of 0 is no target, even where all_features compiles the test in. */
+    if ((FEATURES & VKRT_GPU_FEATURE_ADAPTIVE) != 0u && lighting.target_error > 0.0 && a.samples >= 8u) {
         float n = float(a.samples), mean = a.lum_sum / n;
         precise float var = (a.lum_sq_sum - n * mean * mean) / (n - 1.0);
         float err = sqrt((var > 0.0 ? var : 0.0) / n);

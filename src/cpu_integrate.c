@@ -249,7 +249,8 @@ void cpu_integrate_pixel(const cpu_trace_scene *s, const cpu_trace_params *p, ui
         acc.alpha = primary_hit ? 1.0f : 0.0f;
         /* What a pixel that sees the sky shows is the same in every sample. */
         if (!primary_hit) acc.done = 1;
-        if ((lit->features & VKRT_GPU_FEATURE_ADAPTIVE) && acc.samples >= 8) {
+        /* A target of 0 is no target, even where all_features compiles the test in. */
+        if ((lit->features & VKRT_GPU_FEATURE_ADAPTIVE) && lit->lighting.target_error > 0.0f && acc.samples >= 8) {
             float n = (float)acc.samples, mean = acc.lum_sum / n;
             float var = (acc.lum_sq_sum - n * mean * mean) / (n - 1.0f);
             float err = sqrtf((var > 0.0f ? var : 0.0f) / n);

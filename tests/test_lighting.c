@@ -493,6 +493,25 @@ static void adaptive_sampling_stops_at_the_requested_error(void)
     vkrt_scene_destroy(s);
 }
 
+/* all_features compiles the adaptive test in, but without a target every pixel still takes
+ * every sample: the image and the sample count are the specialised render's. */
+static void all_features_without_a_target_takes_every_sample(void)
+{
+    vkrt_scene *s = NULL;
+    vkrt_scene_create(cpu, &(vkrt_scene_desc){ 0 }, &s);
+    if (!s) return;
+    vkrt_render_desc d = { .width = 16, .height = 16, .mode = VKRT_MODE_AO, .spp = 16 };
+    vkrt_render_stats a_st, b_st;
+    float *a = test_render(cpu, s, d, NULL, &a_st);
+    d.all_features = true;
+    float *b = test_render(cpu, s, d, NULL, &b_st);
+    CHECK_EQ_U64(b_st.samples, a_st.samples);
+    if (a && b) CHECK(memcmp(a, b, 16 * 16 * 4 * sizeof *a) == 0);
+    free(a);
+    free(b);
+    vkrt_scene_destroy(s);
+}
+
 /* The same seed gives the same image, bit for bit; another seed another one. */
 static void seed_makes_renders_reproducible(void)
 {
@@ -566,6 +585,7 @@ int main(void)
     RUN(any_hit_visits_fewer_nodes_than_closest_hit);
     RUN(specialisation_changes_no_pixel);
     RUN(adaptive_sampling_stops_at_the_requested_error);
+    RUN(all_features_without_a_target_takes_every_sample);
     RUN(seed_makes_renders_reproducible);
     RUN(bad_lighting_arguments_are_refused);
     vkrt_context_destroy(cpu);
