@@ -28,6 +28,8 @@ typedef struct bench_options {
     const char *csv_path;      /* also write the rows as CSV here (atomically); NULL: no CSV */
     bool progress;             /* a progress line on stderr (a terminal) */
     /* bench_modes_run only: */
+    uint32_t max_spp;          /* bench --modes: the spp ladder 1, 4, 16, ... up to this; 0: 64
+                                  (quick: 4) */
     uint32_t reference_spp;    /* samples per pixel of the converged references; 0: 1024
                                   (quick: 256) */
     const char *cache_dir;     /* where references are kept between runs; NULL: nowhere */

@@ -262,8 +262,15 @@ static vkrt_result run_rows(modes *m)
 {
     static const uint32_t full_spp[] = BENCH_MODES_SPP, quick_spp[] = BENCH_MODES_QUICK_SPP;
     static const float targets[] = BENCH_MODES_TARGETS;
+    /* The ladder: powers of 4 up to --max-spp, or the default rungs. */
+    uint32_t ladder[10];
     const uint32_t *spps = m->o->quick ? quick_spp : full_spp;
-    const unsigned spp_count = m->o->quick ? sizeof quick_spp / sizeof *quick_spp : sizeof full_spp / sizeof *full_spp;
+    unsigned spp_count = m->o->quick ? sizeof quick_spp / sizeof *quick_spp : sizeof full_spp / sizeof *full_spp;
+    if (m->o->max_spp) {
+        spp_count = 0;
+        for (uint32_t spp = 1; spp <= m->o->max_spp && spp_count < 10; spp *= 4) ladder[spp_count++] = spp;
+        spps = ladder;
+    }
     const unsigned target_count = sizeof targets / sizeof *targets;
     const uint32_t adaptive_spp = m->o->quick ? BENCH_MODES_QUICK_ADAPTIVE_SPP : spps[spp_count - 1];
     const uint32_t feature_spp = m->o->quick ? spps[spp_count - 1] : FEATURE_ROWS_SPP;

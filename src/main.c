@@ -231,6 +231,7 @@ static const char bench_help[] =
     "                            against a converged CPU reference\n"
     "  --procedural N            instead of FILE: a rippled torus of about N triangles (the\n"
     "                            scaling series; exactly 2*R*C, R x C quads, C = 3R)\n"
+    "  --max-spp N               --modes: the spp ladder 1, 4, 16, ... up to N (64; quick: 4)\n"
     "  --ref-spp N               the references' samples per pixel (1024; quick: 256)\n"
     "  --cache DIR               where references are kept between runs, keyed by scene and\n"
     "                            settings (~/.cache/vkrt/bench; empty: nowhere)\n"
@@ -282,6 +283,7 @@ typedef struct options {
     bool compare_embree; /* bench: vkrt against Embree on the same rays */
     bool modes;          /* bench: the lighting modes against converged references */
     uint32_t reference_spp; /* bench --modes: the references' spp; 0: the default */
+    uint32_t max_spp;       /* bench --modes: the top of the spp ladder; 0: the default */
     const char *cache_dir;  /* bench --modes: --cache; NULL: the default place */
     uint32_t procedural;    /* bench: --procedural N */
 } options;
@@ -518,6 +520,10 @@ static int parse_args(int argc, char **argv, options *o)
                 return usage_error("bad --procedural '%s' (triangles, 18 to 100000000)", value);
         } else if (!strcmp(arg, "--modes")) {
             o->modes = true;
+        } else if (!strcmp(arg, "--max-spp")) {
+            NEED_VALUE();
+            if (!parse_u32(value, &o->max_spp) || !o->max_spp || o->max_spp > 65536)
+                return usage_error("bad --max-spp '%s' (1 to 65536)", value);
         } else if (!strcmp(arg, "--ref-spp")) {
             NEED_VALUE();
             if (!parse_u32(value, &o->reference_spp) || !o->reference_spp || o->reference_spp > 65536)
@@ -912,6 +918,7 @@ static int command_bench(options *o)
         .camera = o->render.camera,
         .width = o->render.width, .height = o->render.height, .repeat = o->repeat, .quick = o->quick,
         .csv_path = o->csv, .progress = verbosity >= 1 && !getenv("CI"), .reference_spp = o->reference_spp,
+        .max_spp = o->max_spp,
         .cache_dir = reference_cache_dir(o, ref_buf, sizeof ref_buf),
     };
     bo.context.pipeline_cache_path = pipeline_cache_path(cache_buf, sizeof cache_buf);

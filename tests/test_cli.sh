@@ -80,6 +80,14 @@ else bad "info counts the Cornell box's emissive triangles"; fi
 "$vkrt" info tests/data/lights.gltf >"$tmp/out" 2>"$tmp/err"
 if grep -q "lights        3 point or directional from the file, 0 emissive triangles" "$tmp/out"; then ok "info counts a glTF's punctual lights"
 else bad "info counts a glTF's punctual lights"; fi
+"$vkrt" bench --modes --quick --max-spp 16 --backend cpu --cache "" --csv "$tmp/ladder.csv" >"$tmp/out" 2>"$tmp/err"
+if python3 - "$tmp/ladder.csv" <<'PY'
+import csv, sys
+rows = list(csv.DictReader(open(sys.argv[1])))
+fixed = sorted({int(r["spp"]) for r in rows if float(r["target_error"] or 0) == 0})
+sys.exit(0 if fixed == [1, 4, 16] and all(r["backend"] == "cpu" for r in rows) else 1)
+PY
+then ok "bench --modes --max-spp 16: the ladder 1, 4, 16"; else bad "bench --modes --max-spp 16: the ladder 1, 4, 16"; fi
 expect "bad --light" 2 "$vkrt" render --mode shaded --light spot:0,1,0:1,1,1 -o "$tmp/x.png" --size 8x8
 expect "negative --light colour" 2 "$vkrt" render --mode shaded --light point:0,1,0:-1,1,1 -o "$tmp/x.png" --size 8x8
 expect "bad --sky" 2 "$vkrt" render --mode path --sky 1,1 -o "$tmp/x.png" --size 8x8
