@@ -465,6 +465,9 @@ static vkrt_result render_lighting(vkrt_context *ctx, vkrt_scene *scene, const v
         return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "vkrt_render_desc.max_bounces %u exceeds %u", d->max_bounces, MAX_BOUNCES);
     if (!(d->ao_distance >= 0.0f) || !isfinite(d->ao_distance))
         return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "vkrt_render_desc.ao_distance must be finite and >= 0 (%g)", d->ao_distance);
+    if (d->extra_features & ~VKRT_FEATURE_ALL)
+        return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "vkrt_render_desc.extra_features has bits beyond VKRT_FEATURE_ALL (0x%x)",
+                         d->extra_features);
     if (!(d->target_error >= 0.0f) || !isfinite(d->target_error))
         return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "vkrt_render_desc.target_error must be finite and >= 0 (%g)", d->target_error);
     vkrt_result r = ensure_surfaces(scene, true);
@@ -476,7 +479,7 @@ static vkrt_result render_lighting(vkrt_context *ctx, vkrt_scene *scene, const v
         .surfaces = scene->surfaces, .materials = scene->materials, .scene_radius = scene->radius,
     };
     if ((r = light_table_build(c, &ld, &table)) != VKRT_OK) return r;
-    uint32_t features = lighting_features(scene, &table, mode, d->target_error);
+    uint32_t features = lighting_features(scene, &table, mode, d->target_error) | d->extra_features;
     if (d->all_features) features = VKRT_GPU_FEATURE_ALL;
     vkrt_gpu_lighting lighting = table.lighting;
     lighting.ao_distance = d->ao_distance > 0.0f ? d->ao_distance : 0.5f;

@@ -36,7 +36,9 @@ typedef struct mrow {
     vkrt_backend backend;
     uint32_t spp;
     float target_error;     /* 0: every pixel takes spp samples */
-    bool all_features;      /* every feature compiled in (vkrt_render_desc.all_features) */
+    uint32_t forced;        /* 0: the specialised pipeline; VKRT_FEATURE_ALL: every feature
+                               compiled in (all_features); one bit: that feature alone
+                               (extra_features), so each skip is measured on its own */
     uint32_t features;      /* VKRT_FEATURE_* the render used */
     double spp_taken;       /* samples per pixel actually taken (adaptive: fewer) */
     double trace_ms, total_ms, mrays;
@@ -112,7 +114,8 @@ static vkrt_result render(modes *m, const mrow *w, uint32_t spp, vkrt_render_sta
     vkrt_context *ctx = w->backend == VKRT_BACKEND_CPU ? m->cpu : m->gpu;
     vkrt_render_desc d = render_desc(m, w->mode, spp);
     d.target_error = w->target_error;
-    d.all_features = w->all_features;
+    d.all_features = w->forced == VKRT_FEATURE_ALL;
+    d.extra_features = w->forced == VKRT_FEATURE_ALL ? 0 : w->forced;
     vkrt_result r = vkrt_render(ctx, m->scene[w->backend == VKRT_BACKEND_CPU], &d, m->image, m->floats, st);
     if (r != VKRT_OK)
         snprintf(m->report->error, sizeof m->report->error, "render (%s %s, %u spp): %s", mode_name(w->mode),
@@ -120,23 +123,60 @@ static vkrt_result render(modes *m, const mrow *w, uint32_t spp, vkrt_render_sta
     return r;
 }
 
+/* The rows' feature column: "specialised", "all", or "+" and the one feature forced in. */
+static const char *forced_name(uint32_t forced)
+{
+    switch (forced) {
+    case 0: return "specialised";
+    case VKRT_FEATURE_ALL: return "all";
+    case VKRT_FEATURE_TEXTURES: return "+textures";
+    case VKRT_FEATURE_PUNCTUAL: return "+punctual";
+    case VKRT_FEATURE_EMITTERS: return "+emitters";
+    case VKRT_FEATURE_SKY: return "+sky";
+    case VKRT_FEATURE_SPECULAR: return "+specular";
+    case VKRT_FEATURE_RANDOM: return "+random";
+    case VKRT_FEATURE_ADAPTIVE: return "+adaptive";
+    default: return "?";
+    }
+}
+
+/* The most rows one group can have: 2 backends x (specialised, all, 7 single features). */
+#define MAX_GROUP_ROWS 18
+
 /* The rows of one mode and spp (or target error): each backend, and where asked each with
- * every feature compiled in. Each warms up with a one-sample render of its own pipeline variant
- * (lavapipe compiles it then), then they take turns render by render, so a change of the
- * machine's load during the group slows all of them alike and their ratios stay fair. */
+ * every feature compiled in and (full run) each feature the scene does not use compiled in
+ * alone. Each warms up with a one-sample render of its own pipeline variant (lavapipe compiles
+ * it then), then they take turns render by render, so a change of the machine's load during
+ * the group slows all of them alike and their ratios stay fair. */
 static vkrt_result measure_group(modes *m, vkrt_mode mode, uint32_t spp, float target, bool with_all_features,
                                  const vkrt_backend *backends, unsigned backend_count)
 {
-    unsigned n = backend_count * (with_all_features ? 2 : 1);
-    vkrt_result r = grow_rows(m, n);
+    vkrt_result r = grow_rows(m, MAX_GROUP_ROWS);
     if (r != VKRT_OK) return r;
     mrow *rows = &m->rows[m->row_count];
-    for (unsigned k = 0; k < n; k++)
-        rows[k] = (mrow){ .mode = mode, .backend = backends[k % backend_count], .spp = spp, .target_error = target,
-                          .all_features = k >= backend_count };
-    static double trace[2 * 2][MAX_REPEAT], total[2 * 2][MAX_REPEAT];
+    unsigned n = 0;
+    for (unsigned k = 0; k < backend_count; k++)
+        rows[n++] = (mrow){ .mode = mode, .backend = backends[k], .spp = spp, .target_error = target };
     vkrt_render_stats st;
-    for (unsigned k = 0; k < n && r == VKRT_OK; k++) r = render(m, &rows[k], 1, &st);
+    for (unsigned k = 0; k < n && r == VKRT_OK; k++) {
+        r = render(m, &rows[k], 1, &st);
+        rows[k].features = st.features;
+    }
+    if (r != VKRT_OK) return r;
+    if (with_all_features) {
+        /* The features the specialised pipeline leaves out, as the first backend's render found. */
+        const uint32_t unused = VKRT_FEATURE_ALL & ~rows[0].features;
+        for (unsigned k = 0; k < backend_count; k++) {
+            rows[n++] = (mrow){ .mode = mode, .backend = backends[k], .spp = spp, .target_error = target,
+                                .forced = VKRT_FEATURE_ALL };
+            for (uint32_t bit = 1; !m->o->quick && bit & VKRT_FEATURE_ALL; bit <<= 1)
+                if (unused & bit)
+                    rows[n++] = (mrow){ .mode = mode, .backend = backends[k], .spp = spp, .target_error = target,
+                                        .forced = bit };
+        }
+        for (unsigned k = backend_count; k < n && r == VKRT_OK; k++) r = render(m, &rows[k], 1, &st);
+    }
+    static double trace[MAX_GROUP_ROWS][MAX_REPEAT], total[MAX_GROUP_ROWS][MAX_REPEAT];
     for (uint32_t i = 0; i < m->repeat && r == VKRT_OK; i++)
         for (unsigned k = 0; k < n && r == VKRT_OK; k++) {
             if ((r = render(m, &rows[k], spp, &st)) != VKRT_OK) break;
@@ -171,7 +211,7 @@ static void print_row(const modes *m, const mrow *w)
     if (w->target_error > 0.0f) snprintf(target, sizeof target, "%g", (double)w->target_error);
     format_psnr(w->psnr, psnr, sizeof psnr);
     fprintf(m->out, "| %s | %s | %u | %s | %s | %.2f | %.2f | %.2f | %.2f | %.3e | %.3e | %s |\n", mode_name(w->mode),
-            backend_name(w->backend), w->spp, target, w->all_features ? "all" : "specialised", w->spp_taken,
+            backend_name(w->backend), w->spp, target, forced_name(w->forced), w->spp_taken,
             w->trace_ms, w->total_ms, w->mrays, w->rmse, w->rel_mse, psnr);
     fflush(m->out);
 }
@@ -191,7 +231,7 @@ static vkrt_result write_csv(const modes *m, const char *path, uint64_t triangle
         fprintf(csv.f, "\"%s\",%llu,%u,%u,%s,%s,%u,%g,%s,%u,%.4f,%.4f,%.4f,%.6f,%.6e,%.6e,%s,%u,%.6e\n",
                 bench_scene_name(&m->source), (unsigned long long)triangles, m->width, m->height,
                 mode_name(w->mode), backend_name(w->backend), w->spp, (double)w->target_error,
-                w->all_features ? "all" : "specialised", w->features, w->spp_taken, w->trace_ms, w->total_ms, w->mrays,
+                forced_name(w->forced), w->features, w->spp_taken, w->trace_ms, w->total_ms, w->mrays,
                 w->rmse, w->rel_mse, psnr, ref->spp, ref->info.noise);
     }
     return bench_csv_end(&csv);
@@ -236,24 +276,25 @@ static void print_header(const modes *m, uint64_t triangles)
                     "| RMSE | relMSE | PSNR dB |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n");
 }
 
-/* What compiling every feature in costs against the specialised pipeline, row pairs of one
- * mode, backend and spp. */
+/* What compiling every feature in, or one feature alone, costs against the specialised
+ * pipeline: row pairs of one mode, backend and spp. */
 static void print_feature_savings(const modes *m)
 {
     bool any = false;
     for (unsigned i = 0; i < m->row_count; i++) {
-        const mrow *all = &m->rows[i];
-        if (!all->all_features) continue;
+        const mrow *forced = &m->rows[i];
+        if (!forced->forced) continue;
         for (unsigned j = 0; j < m->row_count; j++) {
             const mrow *sp = &m->rows[j];
-            if (sp->all_features || sp->target_error > 0.0f || sp->mode != all->mode || sp->backend != all->backend ||
-                sp->spp != all->spp)
+            if (sp->forced || sp->target_error != forced->target_error || sp->mode != forced->mode ||
+                sp->backend != forced->backend || sp->spp != forced->spp)
                 continue;
-            if (!any) fprintf(m->out, "\nevery feature compiled in, against the specialised pipeline (trace time):\n");
+            if (!any)
+                fprintf(m->out, "\nfeatures compiled in although unused, against the specialised pipeline (trace time):\n");
             any = true;
-            fprintf(m->out, "  %s %s %u spp: %.2f ms against %.2f ms (%.2fx)\n", mode_name(all->mode),
-                    backend_name(all->backend), all->spp, all->trace_ms, sp->trace_ms,
-                    sp->trace_ms > 0.0 ? all->trace_ms / sp->trace_ms : 0.0);
+            fprintf(m->out, "  %s %s %u spp, %s: %.2f ms against %.2f ms (%.2fx)\n", mode_name(forced->mode),
+                    backend_name(forced->backend), forced->spp, forced_name(forced->forced), forced->trace_ms,
+                    sp->trace_ms, sp->trace_ms > 0.0 ? forced->trace_ms / sp->trace_ms : 0.0);
         }
     }
 }

@@ -411,6 +411,9 @@ typedef struct vkrt_render_desc {
     bool all_features;        /* false (default): the pipeline is specialised to the features the
                                  scene uses; true: every feature compiled in (for testing that a
                                  specialisation changes nothing) */
+    uint32_t extra_features;  /* 0 (default); else VKRT_FEATURE_* bits compiled in (and run on the
+                                 CPU) although the scene does not need them: one skip at a time,
+                                 for measuring what it saves (vkrt bench --modes) */
     float *out_error;         /* NULL (default), or width * height floats (borrowed): each pixel's
                                  estimated standard error of its mean luminance (lighting modes) */
     vkrt_progress_fn progress;/* NULL (default): none; GPU: called between every two device

@@ -88,6 +88,21 @@ fixed = sorted({int(r["spp"]) for r in rows if float(r["target_error"] or 0) == 
 sys.exit(0 if fixed == [1, 4, 16] and all(r["backend"] == "cpu" for r in rows) else 1)
 PY
 then ok "bench --modes --max-spp 16: the ladder 1, 4, 16"; else bad "bench --modes --max-spp 16: the ladder 1, 4, 16"; fi
+"$vkrt" bench --modes --size 16x16 --repeat 1 --max-spp 16 --ref-spp 64 --backend cpu --cache "" --csv "$tmp/skips.csv" >"$tmp/out" 2>"$tmp/err"
+if python3 - "$tmp/skips.csv" <<'PY'
+import csv, sys
+rows = list(csv.DictReader(open(sys.argv[1])))
+single = [r for r in rows if r["features"].startswith("+")]
+spec = {(r["mode"], r["spp"]): r for r in rows if r["features"] == "specialised" and float(r["target_error"] or 0) == 0}
+# Every single-feature row is a feature the specialised render left out, at the same spp.
+for r in single:
+    base = spec[(r["mode"], r["spp"])]
+    name = r["features"][1:]
+    assert int(r["feature_bits"]) & ~int(base["feature_bits"]), r
+assert {r["mode"] for r in single} == {"shaded", "ao", "path"}, single
+assert any(r["features"] == "+random" and r["mode"] == "shaded" for r in single)
+PY
+then ok "bench --modes: a row for each skip on its own"; else bad "bench --modes: a row for each skip on its own"; fi
 expect "bad --light" 2 "$vkrt" render --mode shaded --light spot:0,1,0:1,1,1 -o "$tmp/x.png" --size 8x8
 expect "negative --light colour" 2 "$vkrt" render --mode shaded --light point:0,1,0:-1,1,1 -o "$tmp/x.png" --size 8x8
 expect "bad --sky" 2 "$vkrt" render --mode path --sky 1,1 -o "$tmp/x.png" --size 8x8
