@@ -559,6 +559,7 @@ static void bad_lighting_arguments_are_refused(void)
         { .width = 4, .height = 4, .mode = VKRT_MODE_PATH, .sky = { { -1, 0, 0 }, { 0, 0, 0 } } },
         { .width = 4, .height = 4, .mode = VKRT_MODE_PATH, .precision = VKRT_PRECISION_DOUBLE },
         { .width = 4, .height = 4, .mode = (vkrt_mode)(VKRT_MODE_PATH + 1) },
+        { .width = 4, .height = 4, .mode = VKRT_MODE_PATH, .extra_features = VKRT_FEATURE_ALL + 1 },
     };
     for (size_t i = 0; i < sizeof others / sizeof others[0]; i++) {
         vkrt_result r = vkrt_render(cpu, s, &others[i], rgba, sizeof rgba / sizeof rgba[0], NULL);
