@@ -21,8 +21,14 @@ static void glue_free(void *user, void *pointer)
 
 static void unreadable(core *c, const char *source, const char *what, const char *name, const char *reason)
 {
+    /* stb_image names an unknown PNG chunk by its four raw bytes, which a hostile file makes
+     * anything: the message keeps only printable ASCII. */
+    char clean[128];
+    size_t n = 0;
+    for (; reason[n] && n + 1 < sizeof clean; n++) clean[n] = reason[n] >= 0x20 && reason[n] < 0x7f ? reason[n] : '?';
+    clean[n] = '\0';
     core_log(c, VKRT_LOG_WARN, "%s: %s: texture %s cannot be read (%s); the material has no texture", source, what,
-             name, reason);
+             name, clean);
 }
 
 vkrt_result mesh_add_texture_image(core *c, mesh *m, const void *bytes, size_t size, vkrt_wrap wrap_u, vkrt_wrap wrap_v,

@@ -45,6 +45,51 @@ static void *glue_realloc(void *p, size_t size)
 #define STB_IMAGE_IMPLEMENTATION
 #include <stb_image.h>
 
+static uint32_t be32(const uint8_t *p)
+{
+    return (uint32_t)p[0] << 24 | (uint32_t)p[1] << 16 | (uint32_t)p[2] << 8 | p[3];
+}
+
+/* A PNG whose data stream starts with an empty IDAT chunk makes this stb_image (Debian's
+ * 2.27) compute NULL + 0 before it has a buffer (undefined behaviour, found by fuzz_gltf). An
+ * empty IDAT carries no data, so the same image without those chunks decodes identically: the
+ * copy (allocated through the decode's allocator; NULL when nothing needs dropping or memory
+ * runs out, *out_oom telling which) leaves every other chunk, CRC included, as it was. */
+static uint8_t *png_without_empty_idat(const uint8_t *bytes, size_t size, size_t *out_size, int *out_oom)
+{
+    static const uint8_t signature[8] = { 0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n' };
+    *out_oom = 0;
+    if (size < 8 || memcmp(bytes, signature, 8) != 0) return NULL;
+    int empty = 0;
+    for (size_t off = 8; off + 12 <= size;) {
+        uint32_t len = be32(bytes + off);
+        if (len > size - off - 12) break; /* truncated: stb_image reports it */
+        if (len == 0 && memcmp(bytes + off + 4, "IDAT", 4) == 0) empty = 1;
+        off += 12 + (size_t)len;
+    }
+    if (!empty) return NULL;
+    uint8_t *copy = glue_malloc(size);
+    if (!copy) {
+        *out_oom = 1;
+        return NULL;
+    }
+    memcpy(copy, bytes, 8);
+    size_t off = 8, n = 8;
+    while (off + 12 <= size) {
+        uint32_t len = be32(bytes + off);
+        if (len > size - off - 12) break;
+        size_t chunk = 12 + (size_t)len;
+        if (!(len == 0 && memcmp(bytes + off + 4, "IDAT", 4) == 0)) {
+            memcpy(copy + n, bytes + off, chunk);
+            n += chunk;
+        }
+        off += chunk;
+    }
+    memcpy(copy + n, bytes + off, size - off);
+    *out_size = n + (size - off);
+    return copy;
+}
+
 uint8_t *stb_image_glue_decode_rgba8(const stb_image_glue_allocator *allocator, const void *bytes, size_t size,
                                      uint32_t *out_width, uint32_t *out_height, const char **reason)
 {
@@ -55,9 +100,17 @@ uint8_t *stb_image_glue_decode_rgba8(const stb_image_glue_allocator *allocator, 
         return NULL;
     }
     current = allocator;
-    int w = 0, h = 0, channels = 0;
-    stbi_uc *pixels = stbi_load_from_memory(bytes, (int)size, &w, &h, &channels, 4);
-    if (!pixels) *reason = stbi_failure_reason();
+    int w = 0, h = 0, channels = 0, oom = 0;
+    size_t clean_size = 0;
+    uint8_t *clean = png_without_empty_idat(bytes, size, &clean_size, &oom);
+    stbi_uc *pixels = NULL;
+    if (oom) {
+        *reason = "outofmem";
+    } else {
+        pixels = stbi_load_from_memory(clean ? clean : bytes, (int)(clean ? clean_size : size), &w, &h, &channels, 4);
+        if (!pixels) *reason = stbi_failure_reason();
+    }
+    glue_free(clean);
     current = NULL;
     if (!pixels) return NULL;
     *out_width = (uint32_t)w;
