@@ -39,22 +39,8 @@ static vkrt_result create_descriptor_set(wave *w)
 {
     vk_context *vk = w->vk;
     VkDescriptorPoolSize size = { VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, VKRT_SHADE_BINDING_COUNT };
-    VkDescriptorPoolCreateInfo pool_info = {
-        .sType = VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO,
-        .maxSets = 1,
-        .poolSizeCount = 1,
-        .pPoolSizes = &size,
-    };
-    VkResult res = vkCreateDescriptorPool(vk->device, &pool_info, NULL, &w->pool);
-    if (res != VK_SUCCESS) return vk_fail(vk, res, "vkCreateDescriptorPool (shade)");
-    VkDescriptorSetAllocateInfo alloc = {
-        .sType = VK_STRUCTURE_TYPE_DESCRIPTOR_SET_ALLOCATE_INFO,
-        .descriptorPool = w->pool,
-        .descriptorSetCount = 1,
-        .pSetLayouts = &w->set_layout,
-    };
-    res = vkAllocateDescriptorSets(vk->device, &alloc, &w->set);
-    if (res != VK_SUCCESS) return vk_fail(vk, res, "vkAllocateDescriptorSets (shade)");
+    vkrt_result r = vk_descriptor_set_create(vk, w->set_layout, &size, 1, &w->pool, &w->set);
+    if (r != VKRT_OK) return r;
     const gpu_scene *s = w->scene;
     const VkBuffer buffers[VKRT_SHADE_BINDING_COUNT] = {
         [VKRT_SHADE_BINDING_TRIS] = s->tris.pieces[0].buffer,

@@ -310,22 +310,8 @@ static vkrt_result create_descriptors(vk_context *vk, const gpu_scene *scene, Vk
         { VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, VKRT_BINDING_COUNT - 1 }, /* every binding but the image */
         { VK_DESCRIPTOR_TYPE_STORAGE_IMAGE, 1 },
     };
-    VkDescriptorPoolCreateInfo pool_info = {
-        .sType = VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO,
-        .maxSets = 1,
-        .poolSizeCount = 2,
-        .pPoolSizes = sizes,
-    };
-    VkResult res = vkCreateDescriptorPool(vk->device, &pool_info, NULL, &o->pool);
-    if (res != VK_SUCCESS) return vk_fail(vk, res, "vkCreateDescriptorPool");
-    VkDescriptorSetAllocateInfo alloc = {
-        .sType = VK_STRUCTURE_TYPE_DESCRIPTOR_SET_ALLOCATE_INFO,
-        .descriptorPool = o->pool,
-        .descriptorSetCount = 1,
-        .pSetLayouts = &layout,
-    };
-    res = vkAllocateDescriptorSets(vk->device, &alloc, &o->set);
-    if (res != VK_SUCCESS) return vk_fail(vk, res, "vkAllocateDescriptorSets");
+    vkrt_result r = vk_descriptor_set_create(vk, layout, sizes, 2, &o->pool, &o->set);
+    if (r != VKRT_OK) return r;
     /* Every storage buffer whole, at its binding; then the image. */
     const struct {
         uint32_t binding;

@@ -304,6 +304,28 @@ vkrt_result vk_shade_pipeline_get(vk_context *vk, vk_shade_variant variant, vk_t
     return VKRT_OK;
 }
 
+vkrt_result vk_descriptor_set_create(vk_context *vk, VkDescriptorSetLayout layout, const VkDescriptorPoolSize *sizes,
+                                     uint32_t size_count, VkDescriptorPool *out_pool, VkDescriptorSet *out_set)
+{
+    VkDescriptorPoolCreateInfo pool_info = {
+        .sType = VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO,
+        .maxSets = 1,
+        .poolSizeCount = size_count,
+        .pPoolSizes = sizes,
+    };
+    VkResult res = vkCreateDescriptorPool(vk->device, &pool_info, NULL, out_pool);
+    if (res != VK_SUCCESS) return vk_fail(vk, res, "vkCreateDescriptorPool");
+    VkDescriptorSetAllocateInfo alloc = {
+        .sType = VK_STRUCTURE_TYPE_DESCRIPTOR_SET_ALLOCATE_INFO,
+        .descriptorPool = *out_pool,
+        .descriptorSetCount = 1,
+        .pSetLayouts = &layout,
+    };
+    res = vkAllocateDescriptorSets(vk->device, &alloc, out_set);
+    if (res != VK_SUCCESS) return vk_fail(vk, res, "vkAllocateDescriptorSets");
+    return VKRT_OK;
+}
+
 void vk_pipelines_destroy(vk_context *vk)
 {
     vk_pipelines *p = vk->pipelines;

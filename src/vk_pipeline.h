@@ -45,6 +45,11 @@ typedef struct vk_shade_variant {
 /* As vk_trace_pipeline_get, for shade.comp (its own module, set layout and pipeline layout). */
 vkrt_result vk_shade_pipeline_get(vk_context *vk, vk_shade_variant variant, vk_trace_pipeline *out);
 
+/* A descriptor pool holding exactly one set of `layout` with the given pool sizes, and that set.
+ * On failure the caller still destroys *out_pool (VK_NULL_HANDLE where it was not made). */
+vkrt_result vk_descriptor_set_create(vk_context *vk, VkDescriptorSetLayout layout, const VkDescriptorPoolSize *sizes,
+                                     uint32_t size_count, VkDescriptorPool *out_pool, VkDescriptorSet *out_set);
+
 /* GLSL -> SPIR-V for a compute shader. On success *out_words is allocated with the core
  * allocator (the caller frees it) and *out_count holds its 32-bit words. */
 vkrt_result vk_compile_glsl(core *c, const char *name, const char *source, uint32_t **out_words, size_t *out_count);

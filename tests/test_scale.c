@@ -430,6 +430,18 @@ static bool log_progress(void *user, const char *stage, float fraction)
  * tracing; many rays) cancelled from their progress callback: the callback is called at least
  * every few submissions' time, the call returns VKRT_ERROR_CANCELLED within a moment of the
  * callback saying so, and the context and scene are left usable and leak nothing. */
+
+/* The end of a failure-injection test: the scene and context destroyed, and neither a Vulkan
+ * object (the validation layer reports those at vkDestroyDevice) nor a host block left. */
+static void destroy_and_check_nothing_left(vkrt_context *ctx, vkrt_scene *s)
+{
+    vkrt_scene_destroy(s);
+    const unsigned before = log_errors;
+    vkrt_context_destroy(ctx);
+    CHECK_MSG(log_errors == before, "Vulkan objects left behind at vkDestroyDevice");
+    CHECK_MSG(live_blocks == 0, "%ld host blocks leaked", live_blocks);
+}
+
 static void progress_cancels_within_one_submission(void)
 {
     vkrt_context *ctx = counted_context();
@@ -486,11 +498,7 @@ static void progress_cancels_within_one_submission(void)
     /* Still usable. */
     free(render_stats(ctx, s, &(vkrt_render_desc){ .width = 16, .height = 16 }, NULL));
     CHECK_EQ_U64(vkrt_context_validation_messages(ctx), 0);
-    vkrt_scene_destroy(s);
-    const unsigned before = log_errors;
-    vkrt_context_destroy(ctx);
-    CHECK_MSG(log_errors == before, "Vulkan objects left behind at vkDestroyDevice");
-    CHECK_MSG(live_blocks == 0, "%ld host blocks leaked", live_blocks);
+    destroy_and_check_nothing_left(ctx, s);
 }
 
 /* ---- device failures ---- */
@@ -669,11 +677,7 @@ static void every_failed_device_allocation_is_out_of_device_memory(void)
         }
         fprintf(stderr, "  %s: %u device allocations, each failure clean\n", scene_ops[k].name, n - 1);
     }
-    vkrt_scene_destroy(s);
-    const unsigned before = log_errors;
-    vkrt_context_destroy(ctx);
-    CHECK_MSG(log_errors == before, "Vulkan objects left behind at vkDestroyDevice");
-    CHECK_MSG(live_blocks == 0, "%ld host blocks leaked", live_blocks);
+    destroy_and_check_nothing_left(ctx, s);
 }
 
 /* VK_ERROR_DEVICE_LOST from the second submission's vkQueueSubmit or vkWaitForFences (a fence
@@ -787,11 +791,7 @@ static void every_failed_host_allocation_is_out_of_memory(void)
         }
         fprintf(stderr, "  %s: %ld host allocations, each failure clean\n", ops[k].name, n - 1);
     }
-    vkrt_scene_destroy(s);
-    const unsigned before = log_errors;
-    vkrt_context_destroy(ctx);
-    CHECK_MSG(log_errors == before, "Vulkan objects left behind at vkDestroyDevice");
-    CHECK_MSG(live_blocks == 0, "%ld host blocks leaked", live_blocks);
+    destroy_and_check_nothing_left(ctx, s);
 }
 
 int main(void)
