@@ -27,6 +27,7 @@ layout(constant_id = VKRT_SPEC_ALPHA) const uint ALPHA = 0u;
 layout(constant_id = VKRT_SPEC_ANYHIT) const uint ANYHIT = 0u;
 layout(constant_id = VKRT_SPEC_TEXTURES) const uint TEXTURES = 0u;
 layout(constant_id = VKRT_SPEC_SPLIT) const uint SPLIT = 0u;
+layout(constant_id = VKRT_SPEC_WIDE) const uint WIDE = 0u;
 
 layout(set = 0, binding = VKRT_BINDING_NODES, std430) readonly buffer Nodes {
     vkrt_gpu_node nodes[];
@@ -74,6 +75,9 @@ layout(set = 0, binding = VKRT_BINDING_TEXTURES, std430) readonly buffer Texture
 layout(set = 0, binding = VKRT_BINDING_TEXELS, std430) readonly buffer Texels {
     uvec2 texels[]; /* linear RGBA as halves: (R | G << 16, B | A << 16) */
 };
+/* With WIDE: the wide BVH and the triangles' corners (placeholders otherwise). */
+layout(set = 0, binding = VKRT_BINDING_WIDE_NODES) uniform usamplerBuffer wide_nodes;
+layout(set = 0, binding = VKRT_BINDING_TRACE_TRIS) uniform usamplerBuffer trace_tris;
 /* A split scene's piece addresses (a placeholder otherwise): the nodes, triangles and surfaces
  * bindings then hold only the first piece of each. */
 layout(set = 0, binding = VKRT_BINDING_PIECES, std430) readonly buffer Pieces {
@@ -106,9 +110,8 @@ bool alpha_passes(uint prim, float u, float v);
 /* With ALPHA (a scene with alpha-masked materials) a closer hit must also pass its material's
  * alpha test: where the surface is cut away the ray goes on. Mirrors R(test_triangle) in
  * src/cpu_trace_real.h. */
-void test_triangle(ray r, uint index, inout hit best)
+void test_triangle_data(ray r, uint index, vkrt_gpu_tri tri, inout hit best)
 {
-    vkrt_gpu_tri tri = load_tri(index);
     float t, u, v;
     if (intersect_triangle(r, tri, t, u, v) && hit_closer(t, tri.prim_id, best.t, best.prim) &&
         (ALPHA == 0u || alpha_passes(tri.prim_id, u, v))) {
@@ -118,6 +121,11 @@ void test_triangle(ray r, uint index, inout hit best)
         best.tri = index;
         best.prim = tri.prim_id;
     }
+}
+
+void test_triangle(ray r, uint index, inout hit best)
+{
+    test_triangle_data(r, index, load_tri(index), best);
 }
 
 /* Marks a BVH traversal complete, so resume dispatches pass it by. */
@@ -241,6 +249,15 @@ bool trace_bvh(ray r, uint slot, inout hit best, inout heat_counts heat)
     }
     mark_finished(slot);
     return true;
+}
+
+#include "traverse_wide.glsl"
+
+/* The closest (ANYHIT: any) hit of r through the BVH: the wide one where the pipeline has it. */
+bool trace_scene(ray r, uint slot, inout hit best, inout heat_counts heat)
+{
+    if (WIDE != 0u) return trace_wide(r, slot, best);
+    return trace_bvh(r, slot, best, heat);
 }
 
 /* In a resume dispatch: true for an invocation whose traversal is already complete. */
@@ -369,7 +386,7 @@ void trace_buffer_ray()
         if (already_finished(index)) return;
         if (!valid) {
             mark_finished(index);
-        } else if (!trace_bvh(r, index, best, heat)) {
+        } else if (!trace_scene(r, index, best, heat)) {
             return; /* its hit is written by the dispatch that finishes it */
         }
     }
@@ -419,7 +436,7 @@ void main()
     uint slot = local.y * p.tile_width + local.x;
     if (already_finished(slot)) return;
     ray r = camera_ray(p, x, y);
-    if (trace_bvh(r, slot, best, heat)) {
+    if (trace_scene(r, slot, best, heat)) {
         if (COUNTERS != 0u) counters[slot] = vkrt_gpu_counters(heat.nodes, heat.leaves, heat.tris, 0u);
         finish_pixel_hit(x, y, best);
         imageStore(out_image, ivec2(local), shade(best, heat));

@@ -313,7 +313,7 @@ vkrt_result vkrt_scene_create(vkrt_context *ctx, const vkrt_scene_desc *desc, vk
     }
     mesh_destroy(c, &m);
     if (ctx->vk) {
-        r = gpu_scene_upload(ctx->vk, s->bvh.nodes, s->bvh.node_count, s->tris, s->bvh.tri_count, &s->gpu);
+        r = gpu_scene_upload(ctx->vk, &s->bvh, s->tris, &s->gpu);
         if (r != VKRT_OK) goto fail;
     }
     *out_scene = s;

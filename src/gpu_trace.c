@@ -7,6 +7,7 @@
 
 #include "gpu_pace.h"
 #include "vk_pipeline.h"
+#include "wide_pack.h"
 
 /* Tiles bound the size of the storage image and of the hit and continuation buffers; the
  * submissions within a tile are rectangles the pacer sizes (gpu_pace.h). */
@@ -98,10 +99,34 @@ static vkrt_result write_piece_table(vk_context *vk, gpu_scene *s)
     return r;
 }
 
-vkrt_result gpu_scene_upload(vk_context *vk, const vkrt_gpu_node *nodes, uint32_t node_count,
-                             const vkrt_gpu_tri *tris, uint32_t tri_count, gpu_scene *out)
+/* The wide traversal's texel buffers, or placeholders where the scene is split or the wide
+ * BVH does not fit the traversal's stack or the device's texel buffer limit. */
+static vkrt_result upload_wide(vk_context *vk, const bvh *b, const vkrt_gpu_tri *tris, gpu_scene *out)
+{
+    wide_arrays w = { 0 };
+    vkrt_result r = VKRT_OK;
+    if (!out->split_shift && !vk->no_wide_traversal) r = wide_pack(vk->core, b, tris, &w);
+    if (r != VKRT_OK) return r;
+    const uint64_t texel_limit = vk->properties.limits.maxTexelBufferElements;
+    const bool usable = w.node_count && wide_traversal_fits(w.depth, w.tri_count) &&
+                        (uint64_t)w.node_count * VKRT_WIDE_NODE_TEXELS <= texel_limit &&
+                        (uint64_t)w.tri_count * VKRT_TRACE_TRI_TEXELS <= texel_limit;
+    r = vk_texel_buffer_create(vk, w.node_texels, usable ? w.node_count * VKRT_WIDE_NODE_TEXELS : 0, "vkrt wide BVH",
+                               &out->wide_nodes);
+    if (r == VKRT_OK)
+        r = vk_texel_buffer_create(vk, w.tri_texels, usable ? w.tri_count * VKRT_TRACE_TRI_TEXELS : 0,
+                                   "vkrt triangle corners", &out->trace_tris);
+    out->wide = r == VKRT_OK && usable;
+    out->wide_node_count = out->wide ? w.node_count : 0;
+    wide_arrays_destroy(vk->core, &w);
+    return r;
+}
+
+vkrt_result gpu_scene_upload(vk_context *vk, const bvh *b, const vkrt_gpu_tri *tris, gpu_scene *out)
 {
     memset(out, 0, sizeof *out);
+    const vkrt_gpu_node *nodes = b->nodes;
+    const uint32_t node_count = b->node_count, tri_count = b->tri_count;
     const VkDeviceSize limit = piece_limit(vk);
     const VkDeviceSize node_bytes = (VkDeviceSize)node_count * sizeof *nodes;
     const VkDeviceSize tri_bytes = (VkDeviceSize)tri_count * sizeof *tris;
@@ -146,6 +171,7 @@ vkrt_result gpu_scene_upload(vk_context *vk, const vkrt_gpu_node *nodes, uint32_
         if ((r = vk_buffer_create(vk, placeholder_bytes[i], usage, VK_MEMORY_DEVICE, "vkrt surfaces (placeholder)",
                                   placeholders[i])) != VKRT_OK)
             goto fail;
+    if ((r = upload_wide(vk, b, tris, out)) != VKRT_OK) goto fail;
     out->node_count = node_count;
     out->tri_count = tri_count;
     return VKRT_OK;
@@ -163,11 +189,14 @@ void gpu_scene_destroy(vk_context *vk, gpu_scene *s)
     vk_buffer_destroy(vk, &s->textures);
     vk_buffer_destroy(vk, &s->texels);
     vk_buffer_destroy(vk, &s->pieces);
+    vk_texel_buffer_destroy(vk, &s->wide_nodes);
+    vk_texel_buffer_destroy(vk, &s->trace_tris);
 }
 
 void gpu_scene_usage(const gpu_scene *s, uint64_t *out_bytes, uint32_t *out_buffers)
 {
-    uint64_t bytes = s->materials.allocated + s->textures.allocated + s->texels.allocated + s->pieces.allocated;
+    uint64_t bytes = s->materials.allocated + s->textures.allocated + s->texels.allocated + s->pieces.allocated +
+                     s->wide_nodes.buffer.allocated + s->trace_tris.buffer.allocated;
     const gpu_array *arrays[3] = { &s->nodes, &s->tris, &s->surfaces };
     for (int a = 0; a < 3; a++)
         for (uint32_t k = 0; k < arrays[a]->count; k++) bytes += arrays[a]->pieces[k].allocated;
@@ -307,10 +336,11 @@ static vkrt_result create_descriptors(vk_context *vk, const gpu_scene *scene, Vk
                                       render_objects *o)
 {
     VkDescriptorPoolSize sizes[] = {
-        { VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, VKRT_BINDING_COUNT - 1 }, /* every binding but the image */
+        { VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, VKRT_BINDING_COUNT - 3 }, /* every binding but these: */
         { VK_DESCRIPTOR_TYPE_STORAGE_IMAGE, 1 },
+        { VK_DESCRIPTOR_TYPE_UNIFORM_TEXEL_BUFFER, 2 },
     };
-    vkrt_result r = vk_descriptor_set_create(vk, layout, sizes, 2, &o->pool, &o->set);
+    vkrt_result r = vk_descriptor_set_create(vk, layout, sizes, 3, &o->pool, &o->set);
     if (r != VKRT_OK) return r;
     /* Every storage buffer whole, at its binding; then the image. */
     const struct {
@@ -326,9 +356,9 @@ static vkrt_result create_descriptors(vk_context *vk, const gpu_scene *scene, Vk
         { VKRT_BINDING_PIECES, scene->pieces.buffer },
     };
     enum { BUFFERS = sizeof buffers / sizeof buffers[0] };
-    _Static_assert(BUFFERS == VKRT_BINDING_COUNT - 1, "every binding but the image has a buffer here");
+    _Static_assert(BUFFERS == VKRT_BINDING_COUNT - 3, "every binding but the image and texels has a buffer here");
     VkDescriptorBufferInfo infos[BUFFERS];
-    VkWriteDescriptorSet writes[BUFFERS + 1];
+    VkWriteDescriptorSet writes[BUFFERS + 3];
     for (uint32_t i = 0; i < BUFFERS; i++) {
         infos[i] = (VkDescriptorBufferInfo){ buffers[i].buffer, 0, VK_WHOLE_SIZE };
         writes[i] = (VkWriteDescriptorSet){ .sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET, .dstSet = o->set,
@@ -339,6 +369,15 @@ static vkrt_result create_descriptors(vk_context *vk, const gpu_scene *scene, Vk
     writes[BUFFERS] = (VkWriteDescriptorSet){ .sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET, .dstSet = o->set,
                                               .dstBinding = VKRT_BINDING_IMAGE, .descriptorCount = 1,
                                               .descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_IMAGE, .pImageInfo = &image };
+    const VkBufferView texels[2] = { scene->wide_nodes.view, scene->trace_tris.view };
+    for (uint32_t i = 0; i < 2; i++)
+        writes[BUFFERS + 1 + i] = (VkWriteDescriptorSet){ .sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET,
+                                                          .dstSet = o->set,
+                                                          .dstBinding = VKRT_BINDING_WIDE_NODES + i,
+                                                          .descriptorCount = 1,
+                                                          .descriptorType = VK_DESCRIPTOR_TYPE_UNIFORM_TEXEL_BUFFER,
+                                                          .pTexelBufferView = &texels[i] };
+    _Static_assert(VKRT_BINDING_TRACE_TRIS == VKRT_BINDING_WIDE_NODES + 1, "the texel buffers' bindings are adjacent");
     vkUpdateDescriptorSets(vk->device, sizeof writes / sizeof writes[0], writes, 0, NULL);
     return VKRT_OK;
 }
@@ -736,6 +775,8 @@ vkrt_result gpu_trace_render(vk_context *vk, const gpu_scene *scene, const gpu_t
     };
     /* Only heatmap reads the heat kind: other modes share one pipeline whatever it is. */
     if (variant.mode != VKRT_GPU_MODE_HEATMAP) variant.heat = VKRT_GPU_HEAT_NODES;
+    /* Heat and counters are the binary BVH's steps, which the CPU counts too. */
+    variant.wide = scene->wide && !naive && !variant.counters && variant.mode != VKRT_GPU_MODE_HEATMAP;
     vk_trace_pipeline pipe;
     vkrt_result r = vk_trace_pipeline_get(vk, variant, &pipe);
     if (r != VKRT_OK) return r;
@@ -853,6 +894,7 @@ static vk_trace_variant ray_variant(const vk_context *vk, const gpu_scene *scene
         .anyhit = params->any_hit,
         .textures = params->textured && params->alpha_tested,
         .split = scene->split_shift,
+        .wide = scene->wide && !naive,
     };
 }
 

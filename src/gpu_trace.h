@@ -8,6 +8,7 @@
 #include "../shaders/vkrt_shared.h"
 #include "gpu_pace.h"
 #include "trace_counts.h"
+#include "bvh.h"
 #include "vk_buffer.h"
 
 /* One of a scene's large arrays on the device (nodes, triangles, surfaces): one storage buffer,
@@ -31,16 +32,21 @@ typedef struct gpu_scene {
     uint32_t split_shift;      /* 0: one buffer per array; else log2 of the elements per piece
                                   (VKRT_SPEC_SPLIT of every pipeline that traces the scene) */
     bool surfaces_uploaded;
+    bool wide;                 /* the wide traversal's arrays are there (VKRT_SPEC_WIDE) */
+    vk_texel_buffer wide_nodes; /* its nodes and */
+    vk_texel_buffer trace_tris; /* triangles (one-texel placeholders without them) */
+    uint32_t wide_node_count;
     uint32_t node_count;
     uint32_t tri_count;
 } gpu_scene;
 
-/* Uploads the BVH nodes and the triangles. Where the triangles exceed what one buffer may
+/* Uploads the BVH nodes and the triangles (b->tri_count of them, in BVH order), and, where
+ * the scene fits one buffer per array and the wide traversal can trace it, the wide BVH and
+ * the triangles' corners as texel buffers. Where the triangles exceed what one buffer may
  * hold (the device's maxStorageBufferRange and maxMemoryAllocationSize, or the smaller
  * vk->scene_buffer_limit), every array of the scene is split into pieces; on a device without
  * bufferDeviceAddress that fails with VKRT_ERROR_LIMIT, naming the array and the limit. */
-vkrt_result gpu_scene_upload(vk_context *vk, const vkrt_gpu_node *nodes, uint32_t node_count,
-                             const vkrt_gpu_tri *tris, uint32_t tri_count, gpu_scene *out);
+vkrt_result gpu_scene_upload(vk_context *vk, const bvh *b, const vkrt_gpu_tri *tris, gpu_scene *out);
 void gpu_scene_destroy(vk_context *vk, gpu_scene *s);
 
 /* What the scene holds on the device: the bytes of its memory allocations, and the storage

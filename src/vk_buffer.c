@@ -188,6 +188,40 @@ vkrt_result vk_buffer_upload(vk_context *vk, vk_buffer *dst, const void *data, V
     return r;
 }
 
+vkrt_result vk_texel_buffer_create(vk_context *vk, const uint32_t *data, uint32_t texels, const char *label,
+                                   vk_texel_buffer *out)
+{
+    memset(out, 0, sizeof *out);
+    const uint32_t zero[4] = { 0 };
+    const VkDeviceSize bytes = (VkDeviceSize)(texels ? texels : 1) * sizeof zero;
+    vkrt_result r = vk_buffer_create(vk, bytes, VK_BUFFER_USAGE_UNIFORM_TEXEL_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT,
+                                     VK_MEMORY_DEVICE, label, &out->buffer);
+    if (r == VKRT_OK) r = vk_buffer_upload(vk, &out->buffer, texels ? (const void *)data : zero, bytes);
+    if (r != VKRT_OK) {
+        vk_texel_buffer_destroy(vk, out);
+        return r;
+    }
+    VkBufferViewCreateInfo info = {
+        .sType = VK_STRUCTURE_TYPE_BUFFER_VIEW_CREATE_INFO,
+        .buffer = out->buffer.buffer,
+        .format = VK_FORMAT_R32G32B32A32_UINT,
+        .range = VK_WHOLE_SIZE,
+    };
+    VkResult res = vkCreateBufferView(vk->device, &info, NULL, &out->view);
+    if (res != VK_SUCCESS) {
+        vk_texel_buffer_destroy(vk, out);
+        return vk_fail(vk, res, "vkCreateBufferView");
+    }
+    return VKRT_OK;
+}
+
+void vk_texel_buffer_destroy(vk_context *vk, vk_texel_buffer *t)
+{
+    if (t->view) vkDestroyBufferView(vk->device, t->view, NULL);
+    t->view = VK_NULL_HANDLE;
+    vk_buffer_destroy(vk, &t->buffer);
+}
+
 vkrt_result vk_commands_begin(vk_context *vk, VkCommandBuffer *out)
 {
     *out = VK_NULL_HANDLE;

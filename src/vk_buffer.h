@@ -28,6 +28,18 @@ void vk_buffer_destroy(vk_context *vk, vk_buffer *b);
 VkDeviceAddress vk_buffer_address(vk_context *vk, const vk_buffer *b);
 
 /* Fills a device buffer: a memcpy when it is mapped, else through a staging buffer. */
+/* A read-only uniform texel buffer of RGBA32UI texels and its view (the wide traversal's
+ * arrays: texel fetches are lavapipe's fastest reads). `texels` of 0 makes a one-texel
+ * placeholder for a binding the variant never reads. */
+typedef struct vk_texel_buffer {
+    vk_buffer buffer;
+    VkBufferView view;
+} vk_texel_buffer;
+
+vkrt_result vk_texel_buffer_create(vk_context *vk, const uint32_t *data, uint32_t texels, const char *label,
+                                   vk_texel_buffer *out);
+void vk_texel_buffer_destroy(vk_context *vk, vk_texel_buffer *t);
+
 vkrt_result vk_buffer_upload(vk_context *vk, vk_buffer *dst, const void *data, VkDeviceSize size);
 /* Makes device writes visible to the host before reading b->mapped. */
 vkrt_result vk_buffer_invalidate(vk_context *vk, vk_buffer *b);

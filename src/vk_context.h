@@ -57,6 +57,7 @@ typedef struct vk_context {
                                          (after the real wait, so the work has finished) */
     VkResult fail_result;
     bool fail_at_wait;
+    bool no_wide_traversal;           /* scenes uploaded from now on keep to the binary BVH */
 } vk_context;
 
 /* Creates everything for the device the desc chooses. Failures: VKRT_ERROR_NO_DEVICE (no

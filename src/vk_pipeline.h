@@ -22,6 +22,7 @@ typedef struct vk_trace_variant {
     uint32_t anyhit;     /* 1: stop at the first hit (VKRT_SPEC_ANYHIT) */
     uint32_t textures;   /* 1: the scene has textures (VKRT_SPEC_TEXTURES) */
     uint32_t split;      /* the scene's gpu_scene.split_shift (VKRT_SPEC_SPLIT) */
+    uint32_t wide;       /* 1: the wide BVH through texel buffers (VKRT_SPEC_WIDE) */
 } vk_trace_variant;
 
 typedef struct vk_trace_pipeline {

@@ -158,7 +158,14 @@ static void split_scene_renders_as_one_buffer(void)
             vkrt_trace_desc td = { .traversal = t, .any_hit = any };
             CHECK(vkrt_trace_rays(gpu, split, &td, rays, RAYS, ha) == VKRT_OK);
             CHECK(vkrt_trace_rays(gpu, whole, &td, rays, RAYS, hb) == VKRT_OK);
-            CHECK_MSG(memcmp(ha, hb, RAYS * sizeof *ha) == 0, "trace_rays (any hit %d, traversal %d) differ", any, (int)t);
+            /* Closest hits are the same bits; an any-hit query may be answered by another
+             * triangle where the traversals differ (a split scene keeps to the binary BVH), but
+             * never with a miss for a hit. */
+            size_t differ = 0;
+            for (int i = 0; i < RAYS; i++)
+                differ += any ? (ha[i].prim_id == VKRT_NO_HIT) != (hb[i].prim_id == VKRT_NO_HIT)
+                              : memcmp(&ha[i], &hb[i], sizeof ha[i]) != 0;
+            CHECK_MSG(differ == 0, "trace_rays (any hit %d, traversal %d): %zu rays differ", any, (int)t, differ);
         }
     free(rays);
     free(ha);

@@ -1,0 +1,174 @@
+/* Traversal of the wide BVH (VKRT_SPEC_WIDE; layouts in vkrt_shared.h), read through texel
+ * buffers. One step tests a node's four child boxes from one fetch of seven texels, visits the
+ * nearest child next and pushes the others farthest first, so the stack pops them nearest
+ * first; a leaf's triangles follow each other in the triangle array up to the one marked
+ * VKRT_TRACE_TRI_LAST. The answers are trace_bvh's: the box test is intersect_box's
+ * conservative one four at a time, so no box the ray enters is culled, and the triangle test and
+ * the closest-hit rule (hit_closer) are the same functions, so the visiting order decides
+ * nothing but the time. Heat and counters stay with trace_bvh: they count the binary BVH's
+ * steps, which the CPU reference counts too.
+ *
+ * The loop has the shape of trace_bvh's: one flat loop whose iteration pops a stack entry,
+ * visits a node, or tests one triangle (the first of a leaf together with the step that
+ * reached it), budgeted in the same way (VKRT_SPEC_BUDGET) with the same continuation state.
+ *
+ * Included by trace.comp after test_triangle_data and mark_finished. */
+#ifndef VKRT_TRAVERSE_WIDE_GLSL
+#define VKRT_TRAVERSE_WIDE_GLSL
+
+#define NO_TRI 0xFFFFFFFFu
+
+/* intersect_box's slab() for one axis of four boxes. */
+void slab4(float o, float inv, vec4 lo, vec4 hi, out vec4 out_lo, out vec4 out_hi)
+{
+    precise vec4 t0 = (lo - o) * inv;
+    precise vec4 t1 = (hi - o) * inv;
+    bool parallel = abs(inv) == T_INFINITY;
+    bvec4 inside = bvec4(uvec4(greaterThanEqual(vec4(o), lo)) & uvec4(lessThanEqual(vec4(o), hi)));
+    /* f_min and f_max of trace_common.glsl, per component. */
+    vec4 t_min = mix(t0, t1, lessThan(t1, t0)), t_max = mix(t0, t1, lessThan(t0, t1));
+    out_lo = parallel ? mix(vec4(T_INFINITY), vec4(-T_INFINITY), inside) : t_min;
+    out_hi = parallel ? mix(vec4(-T_INFINITY), vec4(T_INFINITY), inside) : t_max;
+}
+
+vec4 f_min4(vec4 x, vec4 y) { return mix(x, y, lessThan(y, x)); }
+vec4 f_max4(vec4 x, vec4 y) { return mix(x, y, lessThan(x, y)); }
+
+/* A float's bits reordered so that unsigned order is the floats' order (no NaN here). */
+uvec4 order_key(vec4 f)
+{
+    uvec4 b = floatBitsToUint(f);
+    return mix(~b, b | 0x80000000u, greaterThanEqual(f, vec4(0.0)));
+}
+
+float key_float(uint k)
+{
+    return uintBitsToFloat((k & 0x80000000u) != 0u ? k & 0x7FFFFFFFu : ~k);
+}
+
+void sort2(inout uint a, inout uint b)
+{
+    uint lo = min(a, b);
+    b = max(a, b);
+    a = lo;
+}
+
+/* Tests the four child boxes of wide node `node`: returns how many the ray enters and, in
+ * keys, their entry distances nearest first, each an order_key with the slot in its two low
+ * bits (clearing those bits moves a distance towards -infinity, so the distance read back is
+ * never beyond the box and prunes conservatively). Missed slots sort last. */
+uint visit_wide_node(ray r, uint node, float best_t, out uvec4 keys, out uvec4 children)
+{
+    int base = int(node * VKRT_WIDE_NODE_TEXELS);
+    vec4 lo_x = uintBitsToFloat(texelFetch(wide_nodes, base)), lo_y = uintBitsToFloat(texelFetch(wide_nodes, base + 1));
+    vec4 lo_z = uintBitsToFloat(texelFetch(wide_nodes, base + 2)), hi_x = uintBitsToFloat(texelFetch(wide_nodes, base + 3));
+    vec4 hi_y = uintBitsToFloat(texelFetch(wide_nodes, base + 4)), hi_z = uintBitsToFloat(texelFetch(wide_nodes, base + 5));
+    children = texelFetch(wide_nodes, base + 6);
+    vec4 lx, hx, ly, hy, lz, hz;
+    slab4(r.origin.x, r.inv_dir.x, lo_x, hi_x, lx, hx);
+    slab4(r.origin.y, r.inv_dir.y, lo_y, hi_y, ly, hy);
+    slab4(r.origin.z, r.inv_dir.z, lo_z, hi_z, lz, hz);
+    vec4 tnear = f_max4(f_max4(lx, ly), f_max4(lz, vec4(r.tmin)));
+    precise vec4 tfar = f_min4(f_min4(hx, hy), hz) * VKRT_TFAR_WIDEN_FLOAT;
+    tfar = f_min4(tfar, vec4(best_t));
+    bvec4 entered = bvec4(uvec4(lessThanEqual(tnear, tfar)) & uvec4(notEqual(children, uvec4(VKRT_WIDE_NO_CHILD))));
+    uvec4 k = mix(uvec4(0xFFFFFFFFu), (order_key(tnear) & ~3u) | uvec4(0u, 1u, 2u, 3u), entered);
+    /* A sorting network of four. */
+    sort2(k.x, k.y);
+    sort2(k.z, k.w);
+    sort2(k.x, k.z);
+    sort2(k.y, k.w);
+    sort2(k.y, k.z);
+    keys = k;
+    return uint(entered.x) + uint(entered.y) + uint(entered.z) + uint(entered.w);
+}
+
+/* The closest (or, ANYHIT, any) hit of r, as trace_bvh finds it. */
+bool trace_wide(ray r, uint slot, inout hit best)
+{
+    uint stack_ref[VKRT_TRAVERSAL_STACK_SIZE];
+    float stack_tnear[VKRT_TRAVERSAL_STACK_SIZE];
+    uint sp = 0u, node = 0u, tri = NO_TRI;
+    if (BUDGET != 0u && p.resume != 0u) {
+        vkrt_gpu_resume s = states[slot];
+        node = s.node;
+        tri = s.tri_next;
+        sp = s.sp;
+        best = hit(s.t, s.u, s.v, s.tri, s.prim);
+        for (uint i = 0u; i < sp; i++) {
+            vkrt_gpu_stack_entry e = saved_stack[slot * VKRT_TRAVERSAL_STACK_SIZE + i];
+            stack_ref[i] = e.node;
+            stack_tnear[i] = e.tnear;
+        }
+    }
+    uint steps = 0u;
+    bool suspended = false;
+    for (;;) {
+        if (BUDGET != 0u) {
+            if (steps == BUDGET) {
+                suspended = true;
+                break;
+            }
+            steps++;
+        }
+        uint ref = node;
+        if (node == NO_NODE && tri == NO_TRI) {
+            if (sp == 0u) break;
+            sp--;
+            /* A pushed box that starts beyond the closest hit found since cannot improve it. */
+            if (stack_tnear[sp] > best.t) continue;
+            ref = stack_ref[sp];
+        }
+        node = NO_NODE;
+        if (ref != NO_NODE && (ref & VKRT_WIDE_LEAF) == 0u) {
+            uvec4 keys, children;
+            uint entered = visit_wide_node(r, ref, best.t, keys, children);
+            if (entered == 0u) continue;
+            /* Never full: the host keeps the wide BVH within a third of the stack's levels. */
+            if (entered > 3u && sp < VKRT_TRAVERSAL_STACK_SIZE) {
+                stack_ref[sp] = children[keys.w & 3u];
+                stack_tnear[sp] = key_float(keys.w & ~3u);
+                sp++;
+            }
+            if (entered > 2u && sp < VKRT_TRAVERSAL_STACK_SIZE) {
+                stack_ref[sp] = children[keys.z & 3u];
+                stack_tnear[sp] = key_float(keys.z & ~3u);
+                sp++;
+            }
+            if (entered > 1u && sp < VKRT_TRAVERSAL_STACK_SIZE) {
+                stack_ref[sp] = children[keys.y & 3u];
+                stack_tnear[sp] = key_float(keys.y & ~3u);
+                sp++;
+            }
+            ref = children[keys.x & 3u];
+            /* An interior child is the next iteration's node step; a leaf child's first
+             * triangle is tested in this one. */
+            if ((ref & VKRT_WIDE_LEAF) == 0u) {
+                node = ref;
+                continue;
+            }
+        }
+        if (ref != NO_NODE) tri = ref & ~VKRT_WIDE_LEAF;
+        int base = int(tri * VKRT_TRACE_TRI_TEXELS);
+        uvec4 a = texelFetch(trace_tris, base), b = texelFetch(trace_tris, base + 1), c = texelFetch(trace_tris, base + 2);
+        vkrt_gpu_tri corners = vkrt_gpu_tri(uintBitsToFloat(a.xyz), a.w & ~VKRT_TRACE_TRI_LAST, uintBitsToFloat(b.xyz), 0u,
+                                            uintBitsToFloat(c.xyz), 0u, vec3(0.0), 0u);
+        test_triangle_data(r, tri, corners, best);
+        tri = (a.w & VKRT_TRACE_TRI_LAST) != 0u ? NO_TRI : tri + 1u;
+        /* An occlusion query is answered by the first hit. */
+        if (ANYHIT != 0u && best.prim != NO_PRIM) break;
+    }
+    /* Saved after the loop, as trace_bvh does (an `if` inside it would cost every iteration). */
+    if (BUDGET != 0u && suspended) {
+        states[slot] = vkrt_gpu_resume(1u, node, tri, 0u, sp, best.t, best.u, best.v, best.tri, best.prim, 0u, 0u, 0u, 0u,
+                                       0u, 0u);
+        for (uint i = 0u; i < sp; i++)
+            saved_stack[slot * VKRT_TRAVERSAL_STACK_SIZE + i] = vkrt_gpu_stack_entry(stack_ref[i], stack_tnear[i]);
+        atomicAdd(unfinished, 1u);
+        return false;
+    }
+    mark_finished(slot);
+    return true;
+}
+
+#endif

@@ -1,0 +1,30 @@
+/* The wide traversal's device arrays (VKRT_SPEC_WIDE; the layout is in shaders/vkrt_shared.h):
+ * the 4-wide BVH collapsed from the scene's binary one, and the triangles' corners, both as
+ * RGBA32UI texels. Built on the host just before the upload and freed after it. */
+#ifndef VKRT_WIDE_PACK_H
+#define VKRT_WIDE_PACK_H
+
+#include <stdbool.h>
+#include <stdint.h>
+
+#include "../shaders/vkrt_shared.h"
+#include "bvh.h"
+#include "core.h"
+
+typedef struct wide_arrays {
+    uint32_t *node_texels;  /* 4 words a texel, VKRT_WIDE_NODE_TEXELS texels a node */
+    uint32_t node_count;
+    uint32_t *tri_texels;   /* VKRT_TRACE_TRI_TEXELS texels a triangle */
+    uint32_t tri_count;
+    uint32_t depth;         /* levels of wide nodes */
+} wide_arrays;
+
+/* Whether the wide traversal can trace this BVH: its stack must hold every entry a descent
+ * pushes (three per level at most) and prim_id must leave the VKRT_TRACE_TRI_LAST bit free. */
+bool wide_traversal_fits(uint32_t wide_depth, uint32_t tri_count);
+
+/* Fills *out from the binary BVH and its packed triangles (in BVH order). */
+vkrt_result wide_pack(core *c, const bvh *b, const vkrt_gpu_tri *tris, wide_arrays *out);
+void wide_arrays_destroy(core *c, wide_arrays *w);
+
+#endif
