@@ -251,12 +251,26 @@ bool trace_bvh(ray r, uint slot, inout hit best, inout heat_counts heat)
     return true;
 }
 
+/* The wide traversal's rays come from the ray buffer; a hit is stored as it ends, naming the
+ * triangle array index (the wavefront's form; trace_buffer_rays_wide turns the buffer
+ * variant's into vkrt_hit afterwards). */
+bool load_wide_ray(uint index, out ray r)
+{
+    return ray_from_buffer(rays[index], r);
+}
+
+void store_wide_hit(uint index, hit best)
+{
+    hits[index] = best.prim != NO_PRIM ? vkrt_gpu_hit(best.t, best.tri, best.u, best.v)
+                                       : vkrt_gpu_hit(-1.0, NO_PRIM, 0.0, 0.0);
+}
+
 #include "traverse_wide.glsl"
 
 /* The closest (ANYHIT: any) hit of r through the BVH: the wide one where the pipeline has it. */
 bool trace_scene(ray r, uint slot, inout hit best, inout heat_counts heat)
 {
-    if (WIDE != 0u) return trace_wide(r, slot, best);
+    if (WIDE != 0u) return trace_wide(r, true, slot, 0u, best);
     return trace_bvh(r, slot, best, heat);
 }
 
@@ -400,8 +414,36 @@ void trace_buffer_ray()
                                        : vkrt_gpu_hit(-1.0, NO_PRIM, 0.0, 0.0);
 }
 
+/* vkrt_trace_rays and the wavefront through the wide BVH: WIDE_RAYS rays per invocation. The
+ * buffer variant's hits become vkrt_hit once all of the invocation's rays are done: prim_id
+ * instead of the triangle, the distance refined. */
+void trace_buffer_rays_wide()
+{
+    uint slot = gl_WorkGroupID.x * VKRT_TRACE_GROUP_SIZE + gl_LocalInvocationIndex;
+    uint first = wide_ray_index(0u);
+    if (first >= p.tile_width || already_finished(slot)) return;
+    ray r;
+    bool valid = load_wide_ray(first, r);
+    hit best = hit(r.tmax, 0.0, 0.0, NO_PRIM, NO_PRIM);
+    if (!trace_wide(r, valid, slot, 0u, best) || RAYGEN != VKRT_GPU_RAYGEN_BUFFER) return;
+    for (uint k = 0u; k < WIDE_RAYS; k++) {
+        uint index = wide_ray_index(k);
+        if (index >= p.tile_width) break;
+        vkrt_gpu_hit h = hits[index];
+        if (h.tri == NO_PRIM) continue;
+        load_wide_ray(index, r);
+        hit b = hit(h.t, h.u, h.v, h.tri, load_tri(h.tri).prim_id);
+        finish_ray_hit(r, b);
+        hits[index] = vkrt_gpu_hit(b.t, b.prim, b.u, b.v);
+    }
+}
+
 void main()
 {
+    if (RAYGEN != VKRT_GPU_RAYGEN_CAMERA && WIDE != 0u) {
+        trace_buffer_rays_wide();
+        return;
+    }
     if (RAYGEN != VKRT_GPU_RAYGEN_CAMERA) {
         trace_buffer_ray();
         return;

@@ -12,7 +12,8 @@
  * visits a node, or tests one triangle (the first of a leaf together with the step that
  * reached it), budgeted in the same way (VKRT_SPEC_BUDGET) with the same continuation state.
  *
- * Included by trace.comp after test_triangle_data and mark_finished. */
+ * Included by trace.comp after test_triangle_data, mark_finished, load_wide_ray and
+ * store_wide_hit. */
 #ifndef VKRT_TRAVERSE_WIDE_GLSL
 #define VKRT_TRAVERSE_WIDE_GLSL
 
@@ -83,17 +84,38 @@ uint visit_wide_node(ray r, uint node, float best_t, out uvec4 keys, out uvec4 c
     return uint(entered.x) + uint(entered.y) + uint(entered.z) + uint(entered.w);
 }
 
-/* The closest (or, ANYHIT, any) hit of r, as trace_bvh finds it. */
-bool trace_wide(ray r, uint slot, inout hit best)
+/* Rays one invocation traces (VKRT_WIDE_RAYS_PER_LANE): a lane whose ray is done takes its
+ * next one within the same loop, so the eight lanes of a SIMD group stay busy until the group's
+ * rays are all done instead of idling beside the longest one (most primary rays of a view miss
+ * the mesh or end in a few steps). One for the camera: a pixel is its invocation's only ray. */
+const bool WIDE_REFILL = RAYGEN != VKRT_GPU_RAYGEN_CAMERA;
+const uint WIDE_RAYS = WIDE_REFILL ? VKRT_WIDE_RAYS_PER_LANE : 1u;
+
+/* The ray buffer's index of this invocation's k-th ray: consecutive lanes take consecutive
+ * rays (neighbouring pixels for camera ray arrays), the group's rays one round at a time. */
+uint wide_ray_index(uint k)
+{
+    return (gl_WorkGroupID.x * WIDE_RAYS + k) * VKRT_TRACE_GROUP_SIZE + gl_LocalInvocationIndex;
+}
+
+/* The closest (or, ANYHIT, any) hit of r, as trace_bvh finds it; with WIDE_RAYS > 1 the hits of
+ * this invocation's rays from its k-th on (r is that one, `valid` whether it may hit anything),
+ * each stored by store_wide_hit as it ends. Returns false where the budget stopped it (the
+ * state is then in `slot`). */
+bool trace_wide(ray r, bool valid, uint slot, uint k, inout hit best)
 {
     uint stack_ref[VKRT_TRAVERSAL_STACK_SIZE];
     float stack_tnear[VKRT_TRAVERSAL_STACK_SIZE];
-    uint sp = 0u, node = 0u, tri = NO_TRI;
+    uint sp = 0u, node = valid ? 0u : NO_NODE, tri = NO_TRI;
     if (BUDGET != 0u && p.resume != 0u) {
         vkrt_gpu_resume s = states[slot];
         node = s.node;
         tri = s.tri_next;
         sp = s.sp;
+        if (WIDE_REFILL) {
+            k = s.tri_end;
+            valid = load_wide_ray(wide_ray_index(k), r);
+        }
         best = hit(s.t, s.u, s.v, s.tri, s.prim);
         for (uint i = 0u; i < sp; i++) {
             vkrt_gpu_stack_entry e = saved_stack[slot * VKRT_TRAVERSAL_STACK_SIZE + i];
@@ -113,7 +135,18 @@ bool trace_wide(ray r, uint slot, inout hit best)
         }
         uint ref = node;
         if (node == NO_NODE && tri == NO_TRI) {
-            if (sp == 0u) break;
+            if (sp == 0u) {
+                if (!WIDE_REFILL) break;
+                /* This ray is done: the lane takes its next one. */
+                store_wide_hit(wide_ray_index(k), best);
+                k++;
+                uint index = wide_ray_index(k);
+                if (k == WIDE_RAYS || index >= p.tile_width) break;
+                valid = load_wide_ray(index, r);
+                best = hit(r.tmax, 0.0, 0.0, NO_PRIM, NO_PRIM);
+                node = valid ? 0u : NO_NODE;
+                continue;
+            }
             sp--;
             /* A pushed box that starts beyond the closest hit found since cannot improve it. */
             if (stack_tnear[sp] > best.t) continue;
@@ -155,12 +188,16 @@ bool trace_wide(ray r, uint slot, inout hit best)
                                             uintBitsToFloat(c.xyz), 0u, vec3(0.0), 0u);
         test_triangle_data(r, tri, corners, best);
         tri = (a.w & VKRT_TRACE_TRI_LAST) != 0u ? NO_TRI : tri + 1u;
-        /* An occlusion query is answered by the first hit. */
-        if (ANYHIT != 0u && best.prim != NO_PRIM) break;
+        /* An occlusion query is answered by the first hit: the ray ends at the next step. */
+        if (ANYHIT != 0u && best.prim != NO_PRIM) {
+            if (!WIDE_REFILL) break;
+            sp = 0u;
+            tri = NO_TRI;
+        }
     }
     /* Saved after the loop, as trace_bvh does (an `if` inside it would cost every iteration). */
     if (BUDGET != 0u && suspended) {
-        states[slot] = vkrt_gpu_resume(1u, node, tri, 0u, sp, best.t, best.u, best.v, best.tri, best.prim, 0u, 0u, 0u, 0u,
+        states[slot] = vkrt_gpu_resume(1u, node, tri, k, sp, best.t, best.u, best.v, best.tri, best.prim, 0u, 0u, 0u, 0u,
                                        0u, 0u);
         for (uint i = 0u; i < sp; i++)
             saved_stack[slot * VKRT_TRAVERSAL_STACK_SIZE + i] = vkrt_gpu_stack_entry(stack_ref[i], stack_tnear[i]);

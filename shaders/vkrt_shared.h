@@ -269,6 +269,9 @@ VKRT_STRUCT(vkrt_gpu_tri) {
 #define VKRT_WIDE_LEAF 0x80000000u
 #define VKRT_WIDE_NO_CHILD 0xFFFFFFFFu
 #define VKRT_TRACE_TRI_LAST 0x80000000u
+/* Rays each invocation of the wide traversal takes from a ray buffer, one after the other
+ * (trace_wide in shaders/traverse_wide.glsl): a dispatch of n rays has n / 8 invocations. */
+#define VKRT_WIDE_RAYS_PER_LANE 8u
 
 /* Closest hit of one pixel or ray, carried between naive-traversal chunk dispatches. 16 bytes.
  * Ray mode: the last dispatch writes the public vkrt_hit in place (t = -1 and

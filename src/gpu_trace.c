@@ -843,6 +843,12 @@ vkrt_result gpu_trace_render(vk_context *vk, const gpu_scene *scene, const gpu_t
     return r;
 }
 
+/* Whether ray variants trace the wide BVH (every ray variant of the scene does, but naive). */
+static bool wide_traversal(const gpu_scene *scene, bool naive)
+{
+    return scene->wide && !naive;
+}
+
 /* Records one pass over a chunk of rays (its first, a resume, or the next naive chunks):
  * dispatch(es) over the rays, then a copy of the hits into the readback buffer. */
 static void record_rays(VkCommandBuffer cmd, const vk_trace_pipeline *pipe, const render_objects *o,
@@ -863,9 +869,12 @@ static void record_rays(VkCommandBuffer cmd, const vk_trace_pipeline *pipe, cons
     vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_HOST_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT | VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
                          VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT, 0, 1, &inputs, 0, NULL,
                          0, NULL);
-    /* One invocation per ray, 1D over whole workgroups; VKRT_RAY_CHUNK keeps the count of
-     * groups far below the 65,535 a dispatch allows. */
-    record_dispatches(cmd, pipe, o, scene, push, naive, budget, range, div_up(push.tile_width, VKRT_TRACE_GROUP_SIZE), 1);
+    /* One invocation per ray (the wide traversal: per VKRT_WIDE_RAYS_PER_LANE rays), 1D over
+     * whole workgroups; VKRT_RAY_CHUNK keeps the count of groups far below the 65,535 a
+     * dispatch allows. */
+    const uint32_t per_invocation = wide_traversal(scene, naive) ? VKRT_WIDE_RAYS_PER_LANE : 1;
+    record_dispatches(cmd, pipe, o, scene, push, naive, budget, range,
+                      div_up(push.tile_width, VKRT_TRACE_GROUP_SIZE * per_invocation), 1);
     if (device_only) return;
     /* The copy reads the hits the shader wrote. */
     record_buffer_barrier(cmd, o->hits.buffer, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_WRITE_BIT,
@@ -894,7 +903,7 @@ static vk_trace_variant ray_variant(const vk_context *vk, const gpu_scene *scene
         .anyhit = params->any_hit,
         .textures = params->textured && params->alpha_tested,
         .split = scene->split_shift,
-        .wide = scene->wide && !naive,
+        .wide = wide_traversal(scene, naive),
     };
 }
 
