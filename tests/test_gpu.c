@@ -522,6 +522,50 @@ static void gpu_trace_rays_match_cpu_and_naive(void)
     }
 }
 
+/* The wide BVH through texel buffers (the default wherever a scene fits one buffer per array)
+ * against the binary BVH it was collapsed from (the test knob keeps a scene to it): the same
+ * closest hits bit for bit, ray arrays (eight rays per invocation, more than one submission)
+ * and renders alike, and any-hit queries hit where the binary traversal's do. */
+static void gpu_wide_traversal_matches_the_binary_one(void)
+{
+    const char *path = VKRT_MODELS_DIR "/meshes/dragon_48k.obj";
+    vkrt_scene *wide = make_scene(gpu, path, VKRT_BVH_BUILDER_DEFAULT);
+    gpu->vk->no_wide_traversal = true;
+    vkrt_scene *binary = make_scene(gpu, path, VKRT_BVH_BUILDER_DEFAULT);
+    gpu->vk->no_wide_traversal = false;
+    if (!wide || !binary) goto done;
+    CHECK_MSG(wide->gpu.wide && !binary->gpu.wide, "wide arrays uploaded: %d and %d", wide->gpu.wide, binary->gpu.wide);
+    const size_t n = VKRT_RAY_CHUNK + 777;
+    vkrt_ray *rays = random_rays_in_box(n, 99);
+    for (int any = 0; any < 2; any++)
+        for (int isect = VKRT_INTERSECTOR_WATERTIGHT; isect <= VKRT_INTERSECTOR_MOLLER_TRUMBORE; isect++) {
+            vkrt_trace_desc d = { .intersector = (vkrt_intersector)isect, .any_hit = any };
+            vkrt_hit *w = trace_all(gpu, wide, &d, rays, n), *b = trace_all(gpu, binary, &d, rays, n);
+            size_t differ = 0, hits = 0;
+            for (size_t i = 0; i < n; i++) {
+                hits += b[i].prim_id != VKRT_NO_HIT;
+                differ += any ? (w[i].prim_id == VKRT_NO_HIT) != (b[i].prim_id == VKRT_NO_HIT)
+                              : memcmp(&w[i], &b[i], sizeof w[i]) != 0;
+            }
+            fprintf(stderr, "  any hit %d, isect %d: %zu of %zu rays differ (%zu hits)\n", any, isect, differ, n, hits);
+            CHECK_MSG(differ == 0 && hits > n / 10, "any hit %d, isect %d: %zu of %zu rays differ", any, isect, differ, n);
+            free(w);
+            free(b);
+        }
+    free(rays);
+    for (vkrt_mode m = VKRT_MODE_NORMAL; m <= VKRT_MODE_ID; m++) {
+        if (m == VKRT_MODE_HEATMAP) continue; /* the binary BVH's steps, whichever the scene has */
+        vkrt_render_desc rd = { .width = 96, .height = 80, .mode = m };
+        float *a = render(gpu, wide, &rd), *c = render(gpu, binary, &rd);
+        CHECK_MSG(a && c && memcmp(a, c, vkrt_render_floats(96, 80) * sizeof *a) == 0, "mode %d: images differ", (int)m);
+        free(a);
+        free(c);
+    }
+done:
+    vkrt_scene_destroy(wide);
+    vkrt_scene_destroy(binary);
+}
+
 static void gpu_trace_rays_follow_the_documented_rules(void)
 {
     check_ray_rules_on(gpu, VKRT_PRECISION_FLOAT, "gpu");
@@ -1064,6 +1108,7 @@ int main(void)
     RUN(gpu_refuses_double_precision);
     RUN(gpu_trace_rays_follow_the_documented_rules);
     RUN(gpu_trace_rays_match_cpu_and_naive);
+    RUN(gpu_wide_traversal_matches_the_binary_one);
     RUN(gpu_watertight_never_misses_shared_edges_and_vertices);
     RUN(gpu_eye_inside_a_closed_mesh_always_hits);
     RUN(gpu_grazing_hit_distances_are_exact);
