@@ -75,9 +75,10 @@ layout(set = 0, binding = VKRT_BINDING_TEXTURES, std430) readonly buffer Texture
 layout(set = 0, binding = VKRT_BINDING_TEXELS, std430) readonly buffer Texels {
     uvec2 texels[]; /* linear RGBA as halves: (R | G << 16, B | A << 16) */
 };
-/* With WIDE: the wide BVH and the triangles' corners (placeholders otherwise). */
+/* With WIDE: the wide BVH, the triangles and their corners (placeholders otherwise). */
 layout(set = 0, binding = VKRT_BINDING_WIDE_NODES) uniform usamplerBuffer wide_nodes;
 layout(set = 0, binding = VKRT_BINDING_TRACE_TRIS) uniform usamplerBuffer trace_tris;
+layout(set = 0, binding = VKRT_BINDING_TRACE_VERTS) uniform usamplerBuffer trace_verts;
 /* A split scene's piece addresses (a placeholder otherwise): the nodes, triangles and surfaces
  * bindings then hold only the first piece of each. */
 layout(set = 0, binding = VKRT_BINDING_PIECES, std430) readonly buffer Pieces {

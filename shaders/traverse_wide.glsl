@@ -182,12 +182,12 @@ bool trace_wide(ray r, bool valid, uint slot, uint k, inout hit best)
             }
         }
         if (ref != NO_NODE) tri = ref & ~VKRT_WIDE_LEAF;
-        int base = int(tri * VKRT_TRACE_TRI_TEXELS);
-        uvec4 a = texelFetch(trace_tris, base), b = texelFetch(trace_tris, base + 1), c = texelFetch(trace_tris, base + 2);
-        vkrt_gpu_tri corners = vkrt_gpu_tri(uintBitsToFloat(a.xyz), a.w & ~VKRT_TRACE_TRI_LAST, uintBitsToFloat(b.xyz), 0u,
-                                            uintBitsToFloat(c.xyz), 0u, vec3(0.0), 0u);
-        test_triangle_data(r, tri, corners, best);
-        tri = (a.w & VKRT_TRACE_TRI_LAST) != 0u ? NO_TRI : tri + 1u;
+        uvec4 t = texelFetch(trace_tris, int(tri));
+        vec3 v0 = uintBitsToFloat(texelFetch(trace_verts, int(t.x)).xyz);
+        vec3 v1 = uintBitsToFloat(texelFetch(trace_verts, int(t.y)).xyz);
+        vec3 v2 = uintBitsToFloat(texelFetch(trace_verts, int(t.z)).xyz);
+        test_triangle_data(r, tri, vkrt_gpu_tri(v0, t.w & ~VKRT_TRACE_TRI_LAST, v1, 0u, v2, 0u, vec3(0.0), 0u), best);
+        tri = (t.w & VKRT_TRACE_TRI_LAST) != 0u ? NO_TRI : tri + 1u;
         /* An occlusion query is answered by the first hit: the ray ends at the next step. */
         if (ANYHIT != 0u && best.prim != NO_PRIM) {
             if (!WIDE_REFILL) break;

@@ -44,8 +44,10 @@ typedef struct vkrt_float3 { float x, y, z; } vkrt_float3;
 #define VKRT_BINDING_TEXELS 12         /* every texture's texels: linear RGBA as 4 halves (uvec2) */
 #define VKRT_BINDING_PIECES 13         /* vkrt_gpu_address piece table of a split scene (VKRT_SPEC_SPLIT) */
 #define VKRT_BINDING_WIDE_NODES 14     /* uniform texel buffer (RGBA32UI): the wide BVH (VKRT_SPEC_WIDE) */
-#define VKRT_BINDING_TRACE_TRIS 15     /* uniform texel buffer (RGBA32UI): the triangles' corners */
-#define VKRT_BINDING_COUNT 16          /* bindings 0 .. 15: the image one, the two texel buffers,
+#define VKRT_BINDING_TRACE_TRIS 15     /* uniform texel buffer (RGBA32UI): the triangles' corner indices */
+#define VKRT_BINDING_TRACE_VERTS 16    /* uniform texel buffer (RGBA32UI): their corners */
+#define VKRT_BINDING_TEXEL_COUNT 3     /* the uniform texel buffers, the last bindings */
+#define VKRT_BINDING_COUNT 17          /* bindings 0 .. 16: the image one, the texel buffers,
                                           storage buffers the rest */
 
 /* Descriptor bindings of shade.comp (set 0): the lighting modes' wavefront stages. The ray and
@@ -260,12 +262,13 @@ VKRT_STRUCT(vkrt_gpu_tri) {
  * A node is the 4-wide node of src/bvh_wide.h in VKRT_WIDE_NODE_TEXELS texels: the slots'
  * lo.x, lo.y, lo.z, hi.x, hi.y, hi.z (float bits, one slot per component), then their child
  * references: a node index, VKRT_WIDE_LEAF | first triangle, or VKRT_WIDE_NO_CHILD.
- * A triangle is VKRT_TRACE_TRI_TEXELS texels: (v0, prim_id), (v1, 0), (v2, 0), in the triangle
- * array's order, with VKRT_TRACE_TRI_LAST set in the prim_id word of each leaf's last triangle
- * (a leaf reference names only its first). 48 bytes against vkrt_gpu_tri's 64: the normals are
- * read from the triangle array once per ray, at the closest hit. */
+ * A triangle is one texel, in the triangle array's order: the indices of its three corners in
+ * the vertex texels (x, y, z float bits, 0), each corner position stored once however many
+ * triangles share it, and its prim_id, with VKRT_TRACE_TRI_LAST set on each leaf's last
+ * triangle (a leaf reference names only its first). About 24 bytes a triangle against
+ * vkrt_gpu_tri's 64; the normals are read from the triangle array once per ray, at the
+ * closest hit. */
 #define VKRT_WIDE_NODE_TEXELS 7
-#define VKRT_TRACE_TRI_TEXELS 3
 #define VKRT_WIDE_LEAF 0x80000000u
 #define VKRT_WIDE_NO_CHILD 0xFFFFFFFFu
 #define VKRT_TRACE_TRI_LAST 0x80000000u

@@ -109,13 +109,16 @@ static vkrt_result upload_wide(vk_context *vk, const bvh *b, const vkrt_gpu_tri 
     if (r != VKRT_OK) return r;
     const uint64_t texel_limit = vk->properties.limits.maxTexelBufferElements;
     const bool usable = w.node_count && wide_traversal_fits(w.depth, w.tri_count) &&
-                        (uint64_t)w.node_count * VKRT_WIDE_NODE_TEXELS <= texel_limit &&
-                        (uint64_t)w.tri_count * VKRT_TRACE_TRI_TEXELS <= texel_limit;
+                        (uint64_t)w.node_count * VKRT_WIDE_NODE_TEXELS <= texel_limit && w.tri_count <= texel_limit &&
+                        w.vertex_count <= texel_limit;
     r = vk_texel_buffer_create(vk, w.node_texels, usable ? w.node_count * VKRT_WIDE_NODE_TEXELS : 0, "vkrt wide BVH",
                                &out->wide_nodes);
     if (r == VKRT_OK)
-        r = vk_texel_buffer_create(vk, w.tri_texels, usable ? w.tri_count * VKRT_TRACE_TRI_TEXELS : 0,
-                                   "vkrt triangle corners", &out->trace_tris);
+        r = vk_texel_buffer_create(vk, w.tri_texels, usable ? w.tri_count : 0, "vkrt triangle corner indices",
+                                   &out->trace_tris);
+    if (r == VKRT_OK)
+        r = vk_texel_buffer_create(vk, w.vertex_texels, usable ? w.vertex_count : 0, "vkrt triangle corners",
+                                   &out->trace_verts);
     out->wide = r == VKRT_OK && usable;
     out->wide_node_count = out->wide ? w.node_count : 0;
     wide_arrays_destroy(vk->core, &w);
@@ -191,12 +194,13 @@ void gpu_scene_destroy(vk_context *vk, gpu_scene *s)
     vk_buffer_destroy(vk, &s->pieces);
     vk_texel_buffer_destroy(vk, &s->wide_nodes);
     vk_texel_buffer_destroy(vk, &s->trace_tris);
+    vk_texel_buffer_destroy(vk, &s->trace_verts);
 }
 
 void gpu_scene_usage(const gpu_scene *s, uint64_t *out_bytes, uint32_t *out_buffers)
 {
     uint64_t bytes = s->materials.allocated + s->textures.allocated + s->texels.allocated + s->pieces.allocated +
-                     s->wide_nodes.buffer.allocated + s->trace_tris.buffer.allocated;
+                     s->wide_nodes.buffer.allocated + s->trace_tris.buffer.allocated + s->trace_verts.buffer.allocated;
     const gpu_array *arrays[3] = { &s->nodes, &s->tris, &s->surfaces };
     for (int a = 0; a < 3; a++)
         for (uint32_t k = 0; k < arrays[a]->count; k++) bytes += arrays[a]->pieces[k].allocated;
@@ -336,9 +340,9 @@ static vkrt_result create_descriptors(vk_context *vk, const gpu_scene *scene, Vk
                                       render_objects *o)
 {
     VkDescriptorPoolSize sizes[] = {
-        { VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, VKRT_BINDING_COUNT - 3 }, /* every binding but these: */
+        { VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, VKRT_BINDING_COUNT - 1 - VKRT_BINDING_TEXEL_COUNT }, /* all but: */
         { VK_DESCRIPTOR_TYPE_STORAGE_IMAGE, 1 },
-        { VK_DESCRIPTOR_TYPE_UNIFORM_TEXEL_BUFFER, 2 },
+        { VK_DESCRIPTOR_TYPE_UNIFORM_TEXEL_BUFFER, VKRT_BINDING_TEXEL_COUNT },
     };
     vkrt_result r = vk_descriptor_set_create(vk, layout, sizes, 3, &o->pool, &o->set);
     if (r != VKRT_OK) return r;
@@ -356,9 +360,10 @@ static vkrt_result create_descriptors(vk_context *vk, const gpu_scene *scene, Vk
         { VKRT_BINDING_PIECES, scene->pieces.buffer },
     };
     enum { BUFFERS = sizeof buffers / sizeof buffers[0] };
-    _Static_assert(BUFFERS == VKRT_BINDING_COUNT - 3, "every binding but the image and texels has a buffer here");
+    _Static_assert(BUFFERS == VKRT_BINDING_COUNT - 1 - VKRT_BINDING_TEXEL_COUNT,
+                   "every binding but the image and the texel buffers has a buffer here");
     VkDescriptorBufferInfo infos[BUFFERS];
-    VkWriteDescriptorSet writes[BUFFERS + 3];
+    VkWriteDescriptorSet writes[BUFFERS + 1 + VKRT_BINDING_TEXEL_COUNT];
     for (uint32_t i = 0; i < BUFFERS; i++) {
         infos[i] = (VkDescriptorBufferInfo){ buffers[i].buffer, 0, VK_WHOLE_SIZE };
         writes[i] = (VkWriteDescriptorSet){ .sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET, .dstSet = o->set,
@@ -369,15 +374,19 @@ static vkrt_result create_descriptors(vk_context *vk, const gpu_scene *scene, Vk
     writes[BUFFERS] = (VkWriteDescriptorSet){ .sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET, .dstSet = o->set,
                                               .dstBinding = VKRT_BINDING_IMAGE, .descriptorCount = 1,
                                               .descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_IMAGE, .pImageInfo = &image };
-    const VkBufferView texels[2] = { scene->wide_nodes.view, scene->trace_tris.view };
-    for (uint32_t i = 0; i < 2; i++)
+    const VkBufferView texels[VKRT_BINDING_TEXEL_COUNT] = { scene->wide_nodes.view, scene->trace_tris.view,
+                                                            scene->trace_verts.view };
+    for (uint32_t i = 0; i < VKRT_BINDING_TEXEL_COUNT; i++)
         writes[BUFFERS + 1 + i] = (VkWriteDescriptorSet){ .sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET,
                                                           .dstSet = o->set,
                                                           .dstBinding = VKRT_BINDING_WIDE_NODES + i,
                                                           .descriptorCount = 1,
                                                           .descriptorType = VK_DESCRIPTOR_TYPE_UNIFORM_TEXEL_BUFFER,
                                                           .pTexelBufferView = &texels[i] };
-    _Static_assert(VKRT_BINDING_TRACE_TRIS == VKRT_BINDING_WIDE_NODES + 1, "the texel buffers' bindings are adjacent");
+    _Static_assert(VKRT_BINDING_TRACE_TRIS == VKRT_BINDING_WIDE_NODES + 1 &&
+                       VKRT_BINDING_TRACE_VERTS == VKRT_BINDING_WIDE_NODES + 2 &&
+                       VKRT_BINDING_WIDE_NODES + VKRT_BINDING_TEXEL_COUNT == VKRT_BINDING_COUNT,
+                   "the texel buffers' bindings are adjacent, and the last");
     vkUpdateDescriptorSets(vk->device, sizeof writes / sizeof writes[0], writes, 0, NULL);
     return VKRT_OK;
 }

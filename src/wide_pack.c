@@ -4,6 +4,8 @@
 
 #include "bvh_wide.h"
 
+#define NO_VERTEX 0xFFFFFFFFu
+
 static uint32_t float_bits(float f)
 {
     uint32_t u;
@@ -29,42 +31,78 @@ static void pack_node(const bvh4_node *n, uint32_t *texels)
                                                    : n->child[s];
 }
 
-static void pack_corner(vkrt_float3 v, uint32_t w, uint32_t *texel)
+/* Distinct corner positions, by their bits (so -0 and +0 stay apart and every corner reads
+ * back exactly as the triangle array holds it): an open-addressing table of vertex indices. */
+typedef struct vertex_table {
+    uint32_t *slots;
+    uint32_t mask;
+    uint32_t *texels; /* 4 words a vertex */
+    uint32_t count;
+} vertex_table;
+
+static uint32_t position_hash(const uint32_t p[3])
 {
-    texel[0] = float_bits(v.x);
-    texel[1] = float_bits(v.y);
-    texel[2] = float_bits(v.z);
-    texel[3] = w;
+    uint32_t h = p[0] * 0x9E3779B1u ^ p[1] * 0x85EBCA77u ^ p[2] * 0xC2B2AE3Du;
+    return h ^ (h >> 15);
+}
+
+static uint32_t vertex_index(vertex_table *t, vkrt_float3 v)
+{
+    const uint32_t p[3] = { float_bits(v.x), float_bits(v.y), float_bits(v.z) };
+    for (uint32_t i = position_hash(p) & t->mask;; i = (i + 1) & t->mask) {
+        const uint32_t k = t->slots[i];
+        if (k == NO_VERTEX) {
+            uint32_t *texel = t->texels + (size_t)t->count * 4;
+            memcpy(texel, p, sizeof p);
+            texel[3] = 0;
+            return t->slots[i] = t->count++;
+        }
+        if (memcmp(t->texels + (size_t)k * 4, p, sizeof p) == 0) return k;
+    }
 }
 
 vkrt_result wide_pack(core *c, const bvh *b, const vkrt_gpu_tri *tris, wide_arrays *out)
 {
     memset(out, 0, sizeof *out);
+    /* Triangle counts up to VKRT_TRACE_TRI_LAST (wide_traversal_fits) keep these in range. */
+    const uint64_t corners = (uint64_t)b->tri_count * 3;
+    uint64_t table_size = 1;
+    while (table_size < 2 * corners) table_size *= 2;
     bvh4 w;
     vkrt_result r = bvh4_collapse(c, b, &w);
     if (r != VKRT_OK) return r;
+    vertex_table t = { .mask = (uint32_t)(table_size - 1) };
+    const bool fits = table_size <= UINT32_MAX;
     out->node_texels = core_alloc_array(c, (size_t)w.node_count * VKRT_WIDE_NODE_TEXELS, 4 * sizeof(uint32_t));
-    out->tri_texels = core_alloc_array(c, (size_t)b->tri_count * VKRT_TRACE_TRI_TEXELS, 4 * sizeof(uint32_t));
-    if (!out->node_texels || !out->tri_texels) {
+    out->tri_texels = core_alloc_array(c, b->tri_count, 4 * sizeof(uint32_t));
+    t.texels = fits ? core_alloc_array(c, (size_t)corners, 4 * sizeof(uint32_t)) : NULL;
+    t.slots = fits ? core_alloc_array(c, (size_t)table_size, sizeof *t.slots) : NULL;
+    if (!out->node_texels || !out->tri_texels || !t.texels || !t.slots) {
         bvh4_destroy(c, &w);
+        core_free(c, t.texels);
+        core_free(c, t.slots);
         wide_arrays_destroy(c, out);
         return core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "out of memory packing the wide BVH of %u triangles",
                          b->tri_count);
     }
+    memset(t.slots, 0xFF, (size_t)table_size * sizeof *t.slots);
     for (uint32_t i = 0; i < w.node_count; i++)
         pack_node(&w.nodes[i], out->node_texels + (size_t)i * VKRT_WIDE_NODE_TEXELS * 4);
     for (uint32_t i = 0; i < b->tri_count; i++) {
-        uint32_t *t = out->tri_texels + (size_t)i * VKRT_TRACE_TRI_TEXELS * 4;
-        pack_corner(tris[i].v0, tris[i].prim_id, t);
-        pack_corner(tris[i].v1, 0, t + 4);
-        pack_corner(tris[i].v2, 0, t + 8);
+        uint32_t *texel = out->tri_texels + (size_t)i * 4;
+        texel[0] = vertex_index(&t, tris[i].v0);
+        texel[1] = vertex_index(&t, tris[i].v1);
+        texel[2] = vertex_index(&t, tris[i].v2);
+        texel[3] = tris[i].prim_id;
     }
     /* Leaves partition the triangle array: mark where each ends. */
     for (uint32_t i = 0; i < b->node_count; i++) {
         const vkrt_gpu_node *n = &b->nodes[i];
-        if (n->tri_count) out->tri_texels[(size_t)(n->left_first + n->tri_count - 1) * VKRT_TRACE_TRI_TEXELS * 4 + 3] |=
-            VKRT_TRACE_TRI_LAST;
+        if (n->tri_count) out->tri_texels[(size_t)(n->left_first + n->tri_count - 1) * 4 + 3] |= VKRT_TRACE_TRI_LAST;
     }
+    core_free(c, t.slots);
+    out->vertex_texels = t.texels;
+    out->vertex_count = t.count;
     out->node_count = w.node_count;
     out->tri_count = b->tri_count;
     out->depth = w.depth;
@@ -76,5 +114,6 @@ void wide_arrays_destroy(core *c, wide_arrays *w)
 {
     core_free(c, w->node_texels);
     core_free(c, w->tri_texels);
+    core_free(c, w->vertex_texels);
     memset(w, 0, sizeof *w);
 }
