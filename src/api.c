@@ -330,6 +330,8 @@ vkrt_result vkrt_scene_stats_get(const vkrt_scene *scene, vkrt_scene_stats *out_
     *out_stats = scene->stats;
     /* Read now: the surfaces may have reached the device since the scene was made. */
     if (scene->ctx->vk) gpu_scene_usage(&scene->gpu, &out_stats->device_bytes, &out_stats->device_buffers);
+    out_stats->traversal_bytes = scene->ctx->vk ? gpu_scene_traversal_bytes(&scene->gpu)
+                                                : out_stats->node_bytes + out_stats->triangle_bytes;
     return VKRT_OK;
 }
 

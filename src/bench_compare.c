@@ -209,7 +209,7 @@ static vkrt_result measure_query(compare *c, query q)
         } else {
             const vkrt_scene_stats *s = &c->stats[e];
             w->build_ms = s->build_ms;
-            w->bytes_per_tri = (double)(s->node_bytes + s->triangle_bytes) / (double)s->triangles;
+            w->bytes_per_tri = (double)s->traversal_bytes / (double)s->triangles;
         }
     }
     double ms[ENGINE_COUNT][1001];

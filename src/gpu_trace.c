@@ -208,6 +208,16 @@ void gpu_scene_usage(const gpu_scene *s, uint64_t *out_bytes, uint32_t *out_buff
     *out_buffers = s->nodes.count + s->tris.count;
 }
 
+uint64_t gpu_scene_traversal_bytes(const gpu_scene *s)
+{
+    if (s->wide) return s->wide_nodes.buffer.size + s->trace_tris.buffer.size + s->trace_verts.buffer.size;
+    uint64_t bytes = 0;
+    const gpu_array *arrays[2] = { &s->nodes, &s->tris };
+    for (int a = 0; a < 2; a++)
+        for (uint32_t k = 0; k < arrays[a]->count; k++) bytes += arrays[a]->pieces[k].size;
+    return bytes;
+}
+
 vkrt_result gpu_scene_upload_surfaces(vk_context *vk, gpu_scene *s, const gpu_surface_data *d)
 {
     if (s->surfaces_uploaded) return VKRT_OK;

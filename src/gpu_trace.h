@@ -54,6 +54,9 @@ void gpu_scene_destroy(vk_context *vk, gpu_scene *s);
  * buffers of its nodes and triangles (2 unless it is split). */
 void gpu_scene_usage(const gpu_scene *s, uint64_t *out_bytes, uint32_t *out_buffers);
 
+/* The bytes of the arrays the scene's traversal reads (vkrt_scene_stats.traversal_bytes). */
+uint64_t gpu_scene_traversal_bytes(const gpu_scene *s);
+
 /* What gpu_scene_upload_surfaces uploads (counts of at least 1). */
 typedef struct gpu_surface_data {
     const vkrt_gpu_surface *surfaces; /* tri_count of them */
