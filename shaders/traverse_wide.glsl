@@ -107,11 +107,17 @@ bool trace_wide(ray r, bool valid, uint slot, uint k, inout hit best)
     uint stack_ref[VKRT_TRAVERSAL_STACK_SIZE];
     float stack_tnear[VKRT_TRAVERSAL_STACK_SIZE];
     uint sp = 0u, node = valid ? 0u : NO_NODE, tri = NO_TRI;
+    /* The next leaf, held out of the stack while another leaf's triangles are being tested, so
+     * that the nodes under it stay within reach of the node stage. */
+    uint held = NO_NODE;
+    float held_tnear = 0.0;
     if (BUDGET != 0u && p.resume != 0u) {
         vkrt_gpu_resume s = states[slot];
         node = s.node;
         tri = s.tri_next;
         sp = s.sp;
+        held = s.heat_nodes;
+        held_tnear = uintBitsToFloat(s.heat_leaves);
         if (WIDE_REFILL) {
             k = s.tri_end;
             valid = load_wide_ray(wide_ray_index(k), r);
@@ -133,31 +139,68 @@ bool trace_wide(ray r, bool valid, uint slot, uint k, inout hit best)
             }
             steps++;
         }
-        uint ref = node;
-        if (node == NO_NODE && tri == NO_TRI) {
-            if (sp == 0u) {
-                if (!WIDE_REFILL) break;
-                /* This ray is done: the lane takes its next one. */
-                store_wide_hit(wide_ray_index(k), best);
-                k++;
-                uint index = wide_ray_index(k);
-                if (k == WIDE_RAYS || index >= p.tile_width) break;
-                valid = load_wide_ray(index, r);
-                best = hit(r.tmax, 0.0, 0.0, NO_PRIM, NO_PRIM);
-                node = valid ? 0u : NO_NODE;
-                continue;
-            }
-            sp--;
-            /* A pushed box that starts beyond the closest hit found since cannot improve it. */
-            if (stack_tnear[sp] > best.t) continue;
-            ref = stack_ref[sp];
+        if (node == NO_NODE && tri == NO_TRI && sp == 0u && held == NO_NODE) {
+            if (!WIDE_REFILL) break;
+            /* This ray is done: the lane takes its next one, and visits its root below. */
+            store_wide_hit(wide_ray_index(k), best);
+            k++;
+            uint index = wide_ray_index(k);
+            if (k == WIDE_RAYS || index >= p.tile_width) break;
+            valid = load_wide_ray(index, r);
+            best = hit(r.tmax, 0.0, 0.0, NO_PRIM, NO_PRIM);
+            node = valid ? 0u : NO_NODE;
         }
-        node = NO_NODE;
-        if (ref != NO_NODE && (ref & VKRT_WIDE_LEAF) == 0u) {
+        /* One stack entry a step: dropped if it starts beyond the closest hit found since (it
+         * cannot improve it), else taken by whichever stage is free for it, a leaf waiting on
+         * top while another leaf's triangles are being tested. */
+        if (tri == NO_TRI && held != NO_NODE) {
+            if (!(held_tnear > best.t)) tri = held & ~VKRT_WIDE_LEAF;
+            held = NO_NODE;
+        }
+        if (sp > 0u) {
+            uint top = stack_ref[sp - 1u];
+            float top_tnear = stack_tnear[sp - 1u];
+            bool leaf = (top & VKRT_WIDE_LEAF) != 0u;
+            if (top_tnear > best.t) {
+                sp--;
+            } else if (leaf && tri == NO_TRI) {
+                tri = top & ~VKRT_WIDE_LEAF;
+                sp--;
+            } else if (leaf && held == NO_NODE) {
+                held = top;
+                held_tnear = top_tnear;
+                sp--;
+            } else if (!leaf && node == NO_NODE) {
+                node = top;
+                sp--;
+            }
+        }
+        /* Every step runs both stages where it has work for them: lavapipe executes the whole
+         * loop body for all eight lanes of a SIMD group anyway, so a step that tests a triangle
+         * and visits a node costs what one doing either costs. */
+        if (tri != NO_TRI) {
+            uvec4 t = texelFetch(trace_tris, int(tri));
+            vec3 v0 = uintBitsToFloat(texelFetch(trace_verts, int(t.x)).xyz);
+            vec3 v1 = uintBitsToFloat(texelFetch(trace_verts, int(t.y)).xyz);
+            vec3 v2 = uintBitsToFloat(texelFetch(trace_verts, int(t.z)).xyz);
+            test_triangle_data(r, tri, vkrt_gpu_tri(v0, t.w & ~VKRT_TRACE_TRI_LAST, v1, 0u, v2, 0u, vec3(0.0), 0u), best);
+            tri = (t.w & VKRT_TRACE_TRI_LAST) != 0u ? NO_TRI : tri + 1u;
+            /* An occlusion query is answered by the first hit. */
+            if (ANYHIT != 0u && best.prim != NO_PRIM) {
+                if (!WIDE_REFILL) break;
+                sp = 0u;
+                tri = NO_TRI;
+                node = NO_NODE;
+                held = NO_NODE;
+            }
+        }
+        if (node != NO_NODE) {
             uvec4 keys, children;
-            uint entered = visit_wide_node(r, ref, best.t, keys, children);
-            if (entered == 0u) continue;
-            /* Never full: the host keeps the wide BVH within a third of the stack's levels. */
+            uint entered = visit_wide_node(r, node, best.t, keys, children);
+            node = NO_NODE;
+            /* The farther children on the stack, farthest first; the nearest to a free stage,
+             * or on top of them. Never full: the host keeps the wide BVH within a third of the
+             * stack's levels. */
             if (entered > 3u && sp < VKRT_TRAVERSAL_STACK_SIZE) {
                 stack_ref[sp] = children[keys.w & 3u];
                 stack_tnear[sp] = key_float(keys.w & ~3u);
@@ -173,32 +216,27 @@ bool trace_wide(ray r, bool valid, uint slot, uint k, inout hit best)
                 stack_tnear[sp] = key_float(keys.y & ~3u);
                 sp++;
             }
-            ref = children[keys.x & 3u];
-            /* An interior child is the next iteration's node step; a leaf child's first
-             * triangle is tested in this one. */
-            if ((ref & VKRT_WIDE_LEAF) == 0u) {
-                node = ref;
-                continue;
+            uint nearest = children[keys.x & 3u];
+            bool leaf = (nearest & VKRT_WIDE_LEAF) != 0u;
+            if (entered == 0u) {
+            } else if (!leaf) {
+                node = nearest;
+            } else if (tri == NO_TRI) {
+                tri = nearest & ~VKRT_WIDE_LEAF;
+            } else if (held == NO_NODE) {
+                held = nearest;
+                held_tnear = key_float(keys.x & ~3u);
+            } else if (sp < VKRT_TRAVERSAL_STACK_SIZE) {
+                stack_ref[sp] = nearest;
+                stack_tnear[sp] = key_float(keys.x & ~3u);
+                sp++;
             }
-        }
-        if (ref != NO_NODE) tri = ref & ~VKRT_WIDE_LEAF;
-        uvec4 t = texelFetch(trace_tris, int(tri));
-        vec3 v0 = uintBitsToFloat(texelFetch(trace_verts, int(t.x)).xyz);
-        vec3 v1 = uintBitsToFloat(texelFetch(trace_verts, int(t.y)).xyz);
-        vec3 v2 = uintBitsToFloat(texelFetch(trace_verts, int(t.z)).xyz);
-        test_triangle_data(r, tri, vkrt_gpu_tri(v0, t.w & ~VKRT_TRACE_TRI_LAST, v1, 0u, v2, 0u, vec3(0.0), 0u), best);
-        tri = (t.w & VKRT_TRACE_TRI_LAST) != 0u ? NO_TRI : tri + 1u;
-        /* An occlusion query is answered by the first hit: the ray ends at the next step. */
-        if (ANYHIT != 0u && best.prim != NO_PRIM) {
-            if (!WIDE_REFILL) break;
-            sp = 0u;
-            tri = NO_TRI;
         }
     }
     /* Saved after the loop, as trace_bvh does (an `if` inside it would cost every iteration). */
     if (BUDGET != 0u && suspended) {
-        states[slot] = vkrt_gpu_resume(1u, node, tri, k, sp, best.t, best.u, best.v, best.tri, best.prim, 0u, 0u, 0u, 0u,
-                                       0u, 0u);
+        states[slot] = vkrt_gpu_resume(1u, node, tri, k, sp, best.t, best.u, best.v, best.tri, best.prim, held,
+                                       floatBitsToUint(held_tnear), 0u, 0u, 0u, 0u);
         for (uint i = 0u; i < sp; i++)
             saved_stack[slot * VKRT_TRAVERSAL_STACK_SIZE + i] = vkrt_gpu_stack_entry(stack_ref[i], stack_tnear[i]);
         atomicAdd(unfinished, 1u);

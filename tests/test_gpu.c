@@ -643,20 +643,25 @@ static void make_leaf_stack(float **out_pos, uint32_t **out_idx)
     *out_idx = idx;
 }
 
-/* Every ray hits on the GPU, and where `exact`, with the CPU's t and prim_id bit for bit. */
-static void check_long_rays(vkrt_scene *sg, vkrt_scene *sc, vkrt_intersector isect, bool exact, const vkrt_ray *rays,
-                            size_t n, const char *what)
+/* Every ray hits on the GPU, where `exact` with the CPU's t and prim_id bit for bit, and with
+ * a t within t_tolerance (relative) of the CPU's. */
+static void check_long_rays(vkrt_scene *sg, vkrt_scene *sc, vkrt_intersector isect, bool exact, double t_tolerance,
+                            const vkrt_ray *rays, size_t n, const char *what)
 {
     vkrt_trace_desc d = { .intersector = isect };
     vkrt_hit *g = trace_all(gpu, sg, &d, rays, n), *c = trace_all(cpu, sc, &d, rays, n);
     size_t same = 0, hits = 0;
+    double worst = 0.0;
     for (size_t i = 0; i < n; i++) {
         same += g[i].prim_id == c[i].prim_id && memcmp(&g[i].t, &c[i].t, sizeof g[i].t) == 0;
         hits += g[i].prim_id != VKRT_NO_HIT;
+        if (g[i].prim_id != VKRT_NO_HIT && c[i].prim_id != VKRT_NO_HIT)
+            worst = fmax(worst, fabs((double)g[i].t - c[i].t) / c[i].t);
     }
-    fprintf(stderr, "  %s: %zu of %zu rays hit, %zu equal the CPU's\n", what, hits, n, same);
+    fprintf(stderr, "  %s: %zu of %zu rays hit, %zu equal the CPU's, t within %.2g\n", what, hits, n, same, worst);
     CHECK_MSG(hits == n, "%s: %zu of %zu rays miss on the GPU", what, n - hits, n);
     CHECK_MSG(!exact || same == n, "%s: GPU hits equal the CPU's for %zu of %zu rays", what, same, n);
+    CHECK_MSG(worst <= t_tolerance, "%s: t differs by %.3g relatively", what, worst);
     free(g);
     free(c);
 }
@@ -693,12 +698,14 @@ static void gpu_traversals_beyond_the_loop_limit_match_cpu(void)
         vkrt_scene *sg = mesh_scene(gpu, fan_pos, FAN_TRIS + 1, fan_idx, FAN_TRIS, b);
         vkrt_scene *sc = mesh_scene(cpu, fan_pos, FAN_TRIS + 1, fan_idx, FAN_TRIS, b);
         /* Through the vertex every edge value is zero, where the CPU's float watertight test
-         * decides in double and the GPU's accepts, so only Moller-Trumbore (the same float
-         * arithmetic on both) must give the CPU's hits bit for bit; watertight must not leak. */
+         * decides in double and the GPU's accepts; Moller-Trumbore gives each of the 100,000
+         * triangles its own rounding of t = 1 there, and which of them wins depends on the
+         * order the boxes are pruned in, which the GPU's wide traversal and the CPU's do not
+         * share. Both must hit every ray (watertight must not leak), within a few ulps of t. */
         snprintf(what, sizeof what, "fan-%d, %s, watertight", FAN_TRIS, name);
-        if (sg && sc) check_long_rays(sg, sc, VKRT_INTERSECTOR_WATERTIGHT, false, fan_rays, LONG_RAYS, what);
+        if (sg && sc) check_long_rays(sg, sc, VKRT_INTERSECTOR_WATERTIGHT, false, 1e-6, fan_rays, LONG_RAYS, what);
         snprintf(what, sizeof what, "fan-%d, %s, mt", FAN_TRIS, name);
-        if (sg && sc) check_long_rays(sg, sc, VKRT_INTERSECTOR_MOLLER_TRUMBORE, true, fan_rays, LONG_RAYS, what);
+        if (sg && sc) check_long_rays(sg, sc, VKRT_INTERSECTOR_MOLLER_TRUMBORE, false, 1e-6, fan_rays, LONG_RAYS, what);
         vkrt_scene_destroy(sg);
         vkrt_scene_destroy(sc);
         sg = mesh_scene(gpu, stack_pos, STACK_TRIS * 3, stack_idx, STACK_TRIS, b);
@@ -708,7 +715,7 @@ static void gpu_traversals_beyond_the_loop_limit_match_cpu(void)
             CHECK_MSG(st.max_leaf_triangles == STACK_TRIS, "%s: largest leaf %u, not all %d triangles", name,
                       st.max_leaf_triangles, STACK_TRIS);
         snprintf(what, sizeof what, "one leaf of %d, %s", STACK_TRIS, name);
-        if (sg && sc) check_long_rays(sg, sc, VKRT_INTERSECTOR_WATERTIGHT, true, stack_rays, LONG_RAYS, what);
+        if (sg && sc) check_long_rays(sg, sc, VKRT_INTERSECTOR_WATERTIGHT, true, 0.0, stack_rays, LONG_RAYS, what);
         vkrt_scene_destroy(sg);
         vkrt_scene_destroy(sc);
     }
