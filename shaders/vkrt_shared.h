@@ -261,14 +261,16 @@ VKRT_STRUCT(vkrt_gpu_tri) {
  * 1.3-1.6x faster than storage-buffer loads of the same traversal on lavapipe.
  * A node is the 4-wide node of src/bvh_wide.h in VKRT_WIDE_NODE_TEXELS texels: the slots'
  * lo.x, lo.y, lo.z, hi.x, hi.y, hi.z (float bits, one slot per component), then their child
- * references: a node index, VKRT_WIDE_LEAF | first triangle, or VKRT_WIDE_NO_CHILD.
+ * references: a node index, VKRT_WIDE_LEAF | first triangle, or VKRT_WIDE_NO_CHILD, and one
+ * unused texel: 128 bytes, two whole cache lines (112-byte nodes straddling three lines were
+ * 10-13% slower on primary rays on lavapipe, whose traversal waits on memory).
  * A triangle is one texel, in the triangle array's order: the indices of its three corners in
  * the vertex texels (x, y, z float bits, 0), each corner position stored once however many
  * triangles share it, and its prim_id, with VKRT_TRACE_TRI_LAST set on each leaf's last
  * triangle (a leaf reference names only its first). About 24 bytes a triangle against
  * vkrt_gpu_tri's 64; the normals are read from the triangle array once per ray, at the
  * closest hit. */
-#define VKRT_WIDE_NODE_TEXELS 7
+#define VKRT_WIDE_NODE_TEXELS 8
 #define VKRT_WIDE_LEAF 0x80000000u
 #define VKRT_WIDE_NO_CHILD 0xFFFFFFFFu
 #define VKRT_TRACE_TRI_LAST 0x80000000u

@@ -25,6 +25,7 @@ static void pack_node(const bvh4_node *n, uint32_t *texels)
             texels[4 * a + s] = float_bits(n->lo[a][s]);
             texels[4 * (3 + a) + s] = float_bits(n->hi[a][s]);
         }
+    memset(texels + 28, 0, 4 * sizeof *texels);
     for (int s = 0; s < BVH4_WIDTH; s++)
         texels[24 + s] = n->child[s] == BVH4_EMPTY ? VKRT_WIDE_NO_CHILD
                          : n->count[s]             ? VKRT_WIDE_LEAF | n->child[s]
