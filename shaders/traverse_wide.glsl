@@ -54,6 +54,13 @@ void sort2(inout uint a, inout uint b)
     a = lo;
 }
 
+/* Four slots' quantised coordinates (a byte each) decoded as wide_pack.c's dequantise() does. */
+vec4 dequantise(float origin, float scale, uint bytes)
+{
+    precise vec4 v = origin + vec4((uvec4(bytes) >> uvec4(0u, 8u, 16u, 24u)) & 0xFFu) * scale;
+    return v;
+}
+
 /* Tests the four child boxes of wide node `node`: returns how many the ray enters and, in
  * keys, their entry distances nearest first, each an order_key with the slot in its two low
  * bits (clearing those bits moves a distance towards -infinity, so the distance read back is
@@ -61,10 +68,14 @@ void sort2(inout uint a, inout uint b)
 uint visit_wide_node(ray r, uint node, float best_t, out uvec4 keys, out uvec4 children)
 {
     int base = int(node * VKRT_WIDE_NODE_TEXELS);
-    vec4 lo_x = uintBitsToFloat(texelFetch(wide_nodes, base)), lo_y = uintBitsToFloat(texelFetch(wide_nodes, base + 1));
-    vec4 lo_z = uintBitsToFloat(texelFetch(wide_nodes, base + 2)), hi_x = uintBitsToFloat(texelFetch(wide_nodes, base + 3));
-    vec4 hi_y = uintBitsToFloat(texelFetch(wide_nodes, base + 4)), hi_z = uintBitsToFloat(texelFetch(wide_nodes, base + 5));
-    children = texelFetch(wide_nodes, base + 6);
+    uvec4 frame = texelFetch(wide_nodes, base), q_a = texelFetch(wide_nodes, base + 1);
+    uvec4 q_b = texelFetch(wide_nodes, base + 2);
+    children = texelFetch(wide_nodes, base + 3);
+    vec3 origin = uintBitsToFloat(frame.xyz);
+    vec3 scale = uintBitsToFloat(((uvec3(frame.w) >> uvec3(0u, 8u, 16u)) & 0xFFu) << 23u);
+    vec4 lo_x = dequantise(origin.x, scale.x, q_a.x), lo_y = dequantise(origin.y, scale.y, q_a.y);
+    vec4 lo_z = dequantise(origin.z, scale.z, q_a.z), hi_x = dequantise(origin.x, scale.x, q_a.w);
+    vec4 hi_y = dequantise(origin.y, scale.y, q_b.x), hi_z = dequantise(origin.z, scale.z, q_b.y);
     vec4 lx, hx, ly, hy, lz, hz;
     slab4(r.origin.x, r.inv_dir.x, lo_x, hi_x, lx, hx);
     slab4(r.origin.y, r.inv_dir.y, lo_y, hi_y, ly, hy);

@@ -259,18 +259,23 @@ VKRT_STRUCT(vkrt_gpu_tri) {
 
 /* The wide traversal's arrays (VKRT_SPEC_WIDE), read as RGBA32UI texels: texel fetches ran
  * 1.3-1.6x faster than storage-buffer loads of the same traversal on lavapipe.
- * A node is the 4-wide node of src/bvh_wide.h in VKRT_WIDE_NODE_TEXELS texels: the slots'
- * lo.x, lo.y, lo.z, hi.x, hi.y, hi.z (float bits, one slot per component), then their child
- * references: a node index, VKRT_WIDE_LEAF | first triangle, or VKRT_WIDE_NO_CHILD, and one
- * unused texel: 128 bytes, two whole cache lines (112-byte nodes straddling three lines were
- * 10-13% slower on primary rays on lavapipe, whose traversal waits on memory).
+ * A node is the 4-wide node of src/bvh_wide.h in VKRT_WIDE_NODE_TEXELS texels, 64 bytes, one
+ * cache line (lavapipe's traversal waits on memory: 112-byte nodes straddling three lines
+ * traced 10-13% slower than 128-byte ones on two): its boxes quantised to 8 bits per plane
+ * (Ylitie, Karras, Laine, "Efficient Incoherent Ray Traversal on GPUs Through Compressed Wide
+ * BVHs", HPG 2017), rounded outwards so that a decoded box holds the true one:
+ *   texel 0: the frame's origin x, y, z (float bits) and the biased exponents of its
+ *            power-of-two scales, a byte per axis (a coordinate is origin + q * scale);
+ *   texel 1: q of lo.x, lo.y, lo.z and hi.x, texel 2: of hi.y, hi.z (a byte per slot), 0, 0;
+ *   texel 3: the child references: a node index, VKRT_WIDE_LEAF | first triangle, or
+ *            VKRT_WIDE_NO_CHILD.
  * A triangle is one texel, in the triangle array's order: the indices of its three corners in
  * the vertex texels (x, y, z float bits, 0), each corner position stored once however many
  * triangles share it, and its prim_id, with VKRT_TRACE_TRI_LAST set on each leaf's last
  * triangle (a leaf reference names only its first). About 24 bytes a triangle against
  * vkrt_gpu_tri's 64; the normals are read from the triangle array once per ray, at the
  * closest hit. */
-#define VKRT_WIDE_NODE_TEXELS 8
+#define VKRT_WIDE_NODE_TEXELS 4
 #define VKRT_WIDE_LEAF 0x80000000u
 #define VKRT_WIDE_NO_CHILD 0xFFFFFFFFu
 #define VKRT_TRACE_TRI_LAST 0x80000000u

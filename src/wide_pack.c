@@ -18,16 +18,78 @@ bool wide_traversal_fits(uint32_t wide_depth, uint32_t tri_count)
     return (uint64_t)3 * wide_depth <= VKRT_TRAVERSAL_STACK_SIZE && tri_count < VKRT_TRACE_TRI_LAST;
 }
 
+/* The decoded value of quantised coordinate q, as visit_wide_node computes it: float
+ * arithmetic, no fused multiply-add (ISO C mode, -ffp-contract=off; `precise` in the shader). */
+static float dequantise(float origin, float scale, uint32_t q)
+{
+    return origin + (float)q * scale;
+}
+
+static float scale_of(uint32_t biased_exponent)
+{
+    uint32_t bits = biased_exponent << 23;
+    float f;
+    memcpy(&f, &bits, sizeof f);
+    return f;
+}
+
+/* One axis of a node: the origin (the children's lowest bound) and a power-of-two scale
+ * whose 255 steps reach the highest, then each child's bounds rounded outwards to steps, each
+ * checked by decoding it as the shader will: a decoded box never lies inside the true one, so
+ * the wide traversal culls nothing the binary one enters. */
+static void quantise_axis(const bvh4_node *n, int axis, uint32_t used, float *out_origin, uint32_t *out_exponent,
+                          uint32_t q_lo[BVH4_WIDTH], uint32_t q_hi[BVH4_WIDTH])
+{
+    float lo = n->lo[axis][0], hi = n->hi[axis][0];
+    for (uint32_t s = 1; s < used; s++) {
+        lo = n->lo[axis][s] < lo ? n->lo[axis][s] : lo;
+        hi = n->hi[axis][s] > hi ? n->hi[axis][s] : hi;
+    }
+    /* The smallest exponent whose 255 steps from lo reach hi (0: a flat axis, scale 0). */
+    uint32_t e = 0;
+    if (hi > lo) {
+        e = 1;
+        while (e < 254 && dequantise(lo, scale_of(e), 255) < hi) e++;
+    }
+    const float scale = scale_of(e);
+    for (uint32_t s = 0; s < BVH4_WIDTH; s++) {
+        q_lo[s] = q_hi[s] = 0;
+        if (s >= used || e == 0) continue;
+        uint32_t a = 0, b = 255;
+        /* Binary searches over the 256 steps: the highest decoding at or below the child's
+         * lower bound and the lowest at or above its upper one. */
+        for (uint32_t step = 128; step; step >>= 1)
+            if (a + step <= 255 && dequantise(lo, scale, a + step) <= n->lo[axis][s]) a += step;
+        for (uint32_t step = 128; step; step >>= 1)
+            if (b >= step && dequantise(lo, scale, b - step) >= n->hi[axis][s]) b -= step;
+        q_lo[s] = a;
+        q_hi[s] = b;
+    }
+    *out_origin = lo;
+    *out_exponent = e;
+}
+
 static void pack_node(const bvh4_node *n, uint32_t *texels)
 {
-    for (int a = 0; a < 3; a++)
-        for (int s = 0; s < BVH4_WIDTH; s++) {
-            texels[4 * a + s] = float_bits(n->lo[a][s]);
-            texels[4 * (3 + a) + s] = float_bits(n->hi[a][s]);
-        }
-    memset(texels + 28, 0, 4 * sizeof *texels);
+    uint32_t used = 0;
+    while (used < BVH4_WIDTH && n->child[used] != BVH4_EMPTY) used++;
+    uint32_t q[2][3][BVH4_WIDTH], exponents = 0;
+    for (int a = 0; a < 3; a++) {
+        float origin;
+        uint32_t e;
+        quantise_axis(n, a, used, &origin, &e, q[0][a], q[1][a]);
+        texels[a] = float_bits(origin);
+        exponents |= e << (8 * a);
+    }
+    texels[3] = exponents;
+    /* Texels 1 and 2: lo.x, lo.y, lo.z, hi.x, hi.y, hi.z, a byte per slot. */
+    for (int k = 0; k < 6; k++) {
+        const uint32_t *bytes = q[k / 3][k % 3];
+        texels[4 + k] = bytes[0] | bytes[1] << 8 | bytes[2] << 16 | bytes[3] << 24;
+    }
+    texels[10] = texels[11] = 0;
     for (int s = 0; s < BVH4_WIDTH; s++)
-        texels[24 + s] = n->child[s] == BVH4_EMPTY ? VKRT_WIDE_NO_CHILD
+        texels[12 + s] = n->child[s] == BVH4_EMPTY ? VKRT_WIDE_NO_CHILD
                          : n->count[s]             ? VKRT_WIDE_LEAF | n->child[s]
                                                    : n->child[s];
 }
