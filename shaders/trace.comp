@@ -188,7 +188,7 @@ bool trace_bvh(ray r, uint slot, inout hit best, inout heat_counts heat)
             if (sp == 0u) break;
             sp--;
             /* A pushed box that starts beyond the closest hit found since cannot improve it. */
-            if (stack_tnear[sp] > best.t) continue;
+            if (stack_tnear[sp] > prune_bound(best.t)) continue;
             node = stack_node[sp];
         }
         if (node != NO_NODE) {

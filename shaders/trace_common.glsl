@@ -216,7 +216,15 @@ void slab(float o, float inv, float lo, float hi, out float out_lo, out float ou
     out_hi = parallel ? (inside ? T_INFINITY : -T_INFINITY) : f_max(t0, t1);
 }
 
-/* Ize 2013: the far end widened by 1 + 2 gamma(3) before it meets best_t. */
+/* The farthest entry distance a box or stack entry may have and still be visited: best t plus
+ * VKRT_PRUNE_SLACK of it. Mirrors prune_bound() in src/cpu_trace_real.h. */
+float prune_bound(float best_t)
+{
+    precise float bound = best_t + abs(best_t) * VKRT_PRUNE_SLACK;
+    return bound;
+}
+
+/* Ize 2013: the far end widened by 1 + 2 gamma(3) before it meets best_t (as prune_bound). */
 bool intersect_box(ray r, vec3 bmin, vec3 bmax, float best_t, out float out_tnear)
 {
     float lx, hx, ly, hy, lz, hz;
@@ -225,7 +233,7 @@ bool intersect_box(ray r, vec3 bmin, vec3 bmax, float best_t, out float out_tnea
     slab(r.origin.z, r.inv_dir.z, bmin.z, bmax.z, lz, hz);
     float tnear = f_max(f_max(lx, ly), f_max(lz, r.tmin));
     precise float tfar = f_min(f_min(hx, hy), hz) * VKRT_TFAR_WIDEN_FLOAT;
-    tfar = f_min(tfar, best_t);
+    tfar = f_min(tfar, prune_bound(best_t));
     out_tnear = tnear;
     return tnear <= tfar;
 }

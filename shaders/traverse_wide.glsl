@@ -82,7 +82,7 @@ uint visit_wide_node(ray r, uint node, float best_t, out uvec4 keys, out uvec4 c
     slab4(r.origin.z, r.inv_dir.z, lo_z, hi_z, lz, hz);
     vec4 tnear = f_max4(f_max4(lx, ly), f_max4(lz, vec4(r.tmin)));
     precise vec4 tfar = f_min4(f_min4(hx, hy), hz) * VKRT_TFAR_WIDEN_FLOAT;
-    tfar = f_min4(tfar, vec4(best_t));
+    tfar = f_min4(tfar, vec4(prune_bound(best_t)));
     bvec4 entered = bvec4(uvec4(lessThanEqual(tnear, tfar)) & uvec4(notEqual(children, uvec4(VKRT_WIDE_NO_CHILD))));
     uvec4 k = mix(uvec4(0xFFFFFFFFu), (order_key(tnear) & ~3u) | uvec4(0u, 1u, 2u, 3u), entered);
     /* A sorting network of four. */
@@ -165,14 +165,14 @@ bool trace_wide(ray r, bool valid, uint slot, uint k, inout hit best)
          * cannot improve it), else taken by whichever stage is free for it, a leaf waiting on
          * top while another leaf's triangles are being tested. */
         if (tri == NO_TRI && held != NO_NODE) {
-            if (!(held_tnear > best.t)) tri = held & ~VKRT_WIDE_LEAF;
+            if (!(held_tnear > prune_bound(best.t))) tri = held & ~VKRT_WIDE_LEAF;
             held = NO_NODE;
         }
         if (sp > 0u) {
             uint top = stack_ref[sp - 1u];
             float top_tnear = stack_tnear[sp - 1u];
             bool leaf = (top & VKRT_WIDE_LEAF) != 0u;
-            if (top_tnear > best.t) {
+            if (top_tnear > prune_bound(best.t)) {
                 sp--;
             } else if (leaf && tri == NO_TRI) {
                 tri = top & ~VKRT_WIDE_LEAF;

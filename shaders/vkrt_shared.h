@@ -131,6 +131,14 @@ typedef struct vkrt_float3 { float x, y, z; } vkrt_float3;
 #define VKRT_TFAR_WIDEN_FLOAT 1.000000476837158203125
 #define VKRT_TFAR_WIDEN_DOUBLE 1.000000000000000888178419700125232338905334472656250
 
+/* Ties at the closest hit (two triangles sharing an edge or a vertex that the ray passes,
+ * both at the same float t) go to the lower prim_id whatever the traversal order, but only if
+ * both triangles get tested: a box is culled or a stack entry dropped only when it starts
+ * beyond best t plus this fraction of it, so the rounding of a box's entry distance, which can
+ * come out a few ulps above the t of a triangle lying on its face, never hides the winner of a
+ * tie (the slack admits only boxes whose entry is within 1.5e-5 of the hit). */
+#define VKRT_PRUNE_SLACK (1.0 / 65536.0)
+
 /* Secondary-ray origins (ray_offset in src/ray_offset.c and shaders/trace_common.glsl; Wächter,
  * Binder, Ray Tracing Gems ch. 6, 2019): 256 ulps per unit of normal covers the error of a hit
  * point computed from barycentrics in float; below 1/32 in magnitude a coordinate's ulps get

@@ -222,8 +222,16 @@ static inline void R(slab)(REAL o, REAL inv, REAL lo, REAL hi, REAL *out_lo, REA
     *out_hi = parallel ? (inside ? REAL_INF : -REAL_INF) : R(f_max)(t0, t1);
 }
 
+/* The farthest entry distance a box or stack entry may have and still be visited: best t plus
+ * VKRT_PRUNE_SLACK of it, so that both triangles of a tie get tested whatever the order (see
+ * vkrt_shared.h). Mirrors prune_bound() in shaders/trace_common.glsl. */
+static inline REAL R(prune_bound)(REAL best_t)
+{
+    return best_t + R(f_abs)(best_t) * (REAL)VKRT_PRUNE_SLACK;
+}
+
 /* Ize 2013: the far end widened by 1 + 2 gamma(3) (REAL_TFAR_WIDEN) before it meets
- * best_t, so a box the exact ray enters is never culled by rounding. */
+ * best_t (as prune_bound), so a box the exact ray enters is never culled by rounding. */
 static bool R(intersect_box)(const R(ray) *r, const vkrt_gpu_node *n, REAL best_t, REAL *out_tnear)
 {
     REAL lx, hx, ly, hy, lz, hz;
@@ -232,7 +240,7 @@ static bool R(intersect_box)(const R(ray) *r, const vkrt_gpu_node *n, REAL best_
     R(slab)(r->origin.z, r->inv_dir.z, (REAL)n->bmin.z, (REAL)n->bmax.z, &lz, &hz);
     REAL tnear = R(f_max)(R(f_max)(lx, ly), R(f_max)(lz, r->tmin));
     REAL tfar = R(f_min)(R(f_min)(hx, hy), hz) * (REAL)REAL_TFAR_WIDEN;
-    tfar = R(f_min)(tfar, best_t);
+    tfar = R(f_min)(tfar, R(prune_bound)(best_t));
     *out_tnear = tnear;
     return tnear <= tfar;
 }
@@ -294,7 +302,7 @@ static void R(trace_bvh)(const cpu_trace_scene *s, vkrt_intersector isect, const
         }
         if (descend) continue;
         /* A pushed box that starts beyond the closest hit found since cannot improve it. */
-        while (sp > 0 && stack_tnear[sp - 1] > best->t) sp--;
+        while (sp > 0 && stack_tnear[sp - 1] > R(prune_bound)(best->t)) sp--;
         if (sp == 0) break;
         sp--;
         node = stack_node[sp];
