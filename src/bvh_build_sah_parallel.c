@@ -1,0 +1,439 @@
+/* The binned SAH builder on several threads, for meshes of more than SAH_TASK_REFS triangles.
+ *
+ * The classic two-phase scheme (Wald 2007, section 4.3; Embree's BVH builders split the same
+ * way): the top levels, where nodes are few and large, are split level by level with all
+ * threads binning and partitioning fixed pieces of each node's references together; below
+ * SAH_TASK_REFS references a node is a subtree that one thread builds serially
+ * (bvh_build_sah_subtree()), largest subtrees first.
+ *
+ * The result does not depend on the thread count or on scheduling, bit for bit:
+ * - the pieces are SAH_CHUNK_REFS references, not one per thread, and their bins and bounds
+ *   are merged in piece order by the calling thread, so every split decision sees the same
+ *   numbers;
+ * - the top levels partition stably into a second reference array (and back, level by
+ *   level), so the order of references is a function of the decisions alone;
+ * - every node of n references owns 2n - 2 node slots for its descendants, fixed before it
+ *   is built: its children pair first, then the left child's slots, then the right child's.
+ *   A subtree fills the start of its slots in the serial builder's depth-first order and
+ *   leaves the rest unused; squeezing those holes out at the end gives exactly the node array
+ *   of one thread building the same tree depth first (children adjacent, node 0 the root).
+ *
+ * Progress reports and the user's callback stay on the calling thread (work_pool.h); workers
+ * poll for cancellation. Every allocation here is made before any worker runs and can fail
+ * cleanly: the build then frees everything and returns VKRT_ERROR_OUT_OF_MEMORY. */
+#include <stdatomic.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "bvh_build_sah.h"
+
+/* Pieces of the top levels: large enough that a piece's bins (3.5 KB) are merged at a small
+ * cost per reference, small enough for 2-16 threads to share a node of 2 * SAH_TASK_REFS. */
+#define SAH_CHUNK_REFS 8192
+
+/* A node of the top levels, or the root of a subtree. */
+typedef struct top_node {
+    bvh_build_task task;           /* task.node is its slot; its box is already there */
+    uint32_t region;               /* its descendants' slots: 2 * count - 2 from here */
+    uint32_t chunk0, chunks;       /* its pieces in the level's piece array */
+    sah_grid grid;
+    sah_split split;               /* axis -1 where it becomes a subtree */
+    uint32_t left_count;
+    bvh_build_bounds left, right;  /* of its children */
+} top_node;
+
+/* A piece of a top node's references. */
+typedef struct sah_chunk {
+    uint32_t node;                 /* its top node in the level */
+    uint32_t first, count;
+    uint32_t left_at, right_at;    /* where its references go when the node is partitioned */
+    bvh_build_bounds bounds[2];    /* of its references (setup) / of its left and right ones */
+} sah_chunk;
+
+typedef struct subtree {
+    bvh_build_task task;
+    uint32_t region;
+    bool in_scratch;               /* its references are in the scratch array */
+    uint32_t used;                 /* slots its build filled, from region on */
+    uint32_t depth;                /* of its deepest leaf */
+    uint32_t shift;                /* unused slots before it: its nodes move down this far */
+} subtree;
+
+/* A top node that was split, for renumbering its children at the end. */
+typedef struct top_split {
+    uint32_t slot, region, first;
+} top_split;
+
+typedef struct sah_job {
+    bvh_build_state *b;
+    const mesh *m;
+    uint32_t max_leaf;
+    work_pool *pool;
+    sah_ref *refs[2];              /* b->refs and the scratch array the top levels swap with */
+    uint32_t src;                  /* which of them holds the current level */
+    top_node *level, *next;
+    uint32_t level_count, next_count, level_cap;
+    sah_chunk *chunks;
+    sah_binning *chunk_bins;
+    uint32_t chunk_count, chunk_cap;
+    subtree *subtrees;
+    size_t subtree_count, subtree_cap;
+    top_split *splits;
+    size_t split_count, split_cap;
+    _Atomic uint64_t placed;       /* triangles in the leaves of finished subtrees */
+} sah_job;
+
+static uint32_t div_up(uint32_t a, uint32_t b) { return a / b + (a % b != 0); }
+
+/* ---- setup: references and root bounds ------------------------------------------------ */
+
+static void setup_chunk(void *job, uint32_t i)
+{
+    sah_job *j = job;
+    uint32_t first = i * SAH_CHUNK_REFS, n = j->b->tri_count - first;
+    bvh_build_sah_refs(j->m, j->refs[0], first, n < SAH_CHUNK_REFS ? n : SAH_CHUNK_REFS, &j->chunks[i].bounds[0]);
+}
+
+static void bounds_merge(bvh_build_bounds *into, const bvh_build_bounds *from)
+{
+    bvh_build_box_grow(into->bmin, into->bmax, from->bmin, from->bmax);
+    bvh_build_box_grow(into->cmin, into->cmax, from->cmin, from->cmax);
+}
+
+/* ---- top levels ------------------------------------------------------------------------- */
+
+static void bin_chunk(void *job, uint32_t i)
+{
+    sah_job *j = job;
+    const sah_chunk *k = &j->chunks[i];
+    const sah_ref *refs = j->refs[j->src];
+    bvh_build_sah_binning_empty(&j->chunk_bins[i]);
+    bvh_build_sah_bin(refs + k->first, refs + k->first + k->count, &j->level[k->node].grid, &j->chunk_bins[i]);
+}
+
+/* A stable partition into the other array: each piece writes its left references from
+ * left_at and its right ones from right_at, in order, then bounds both runs' centroids. The
+ * store address is selected, not branched on: which side a reference falls is a coin toss. */
+static void partition_chunk(void *job, uint32_t i)
+{
+    sah_job *j = job;
+    sah_chunk *k = &j->chunks[i];
+    const top_node *t = &j->level[k->node];
+    if (t->split.axis < 0) return;
+    const sah_ref *from = j->refs[j->src] + k->first, *end = from + k->count;
+    sah_ref *to = j->refs[!j->src];
+    uint32_t left = k->left_at, right = k->right_at;
+    for (; from < end; from++) {
+        bool goes_left = bvh_build_sah_goes_left(from, &t->grid, &t->split);
+        to[goes_left ? left : right] = *from;
+        left += goes_left;
+        right += !goes_left;
+    }
+    bvh_build_sah_centroid_bounds(to + k->left_at, to + left, &k->bounds[0]);
+    bvh_build_sah_centroid_bounds(to + k->right_at, to + right, &k->bounds[1]);
+}
+
+static bool add_subtree(sah_job *j, const top_node *t)
+{
+    if (core_grow(j->b->c, (void **)&j->subtrees, &j->subtree_cap, j->subtree_count + 1, sizeof *j->subtrees) != 0)
+        return false;
+    j->subtrees[j->subtree_count++] = (subtree){ .task = t->task, .region = t->region, .in_scratch = j->src == 1 };
+    return true;
+}
+
+/* Chooses the split of each large node of the level from its pieces' bins; the others, and
+ * those that bins cannot split well, become subtrees. */
+static bool decide_level(sah_job *j)
+{
+    for (uint32_t n = 0; n < j->level_count; n++) {
+        top_node *t = &j->level[n];
+        if (!t->chunks) continue;
+        sah_binning merged;
+        bvh_build_sah_binning_empty(&merged);
+        for (uint32_t c = t->chunk0; c < t->chunk0 + t->chunks; c++) bvh_build_sah_binning_merge(&merged, &j->chunk_bins[c]);
+        sah_decision d = bvh_build_sah_decide(&merged, &t->grid, &j->b->nodes[t->task.node], t->task.count,
+                                              j->max_leaf, &t->split);
+        uint32_t left_count = 0;
+        for (int k = 0; d == SAH_SPLIT && k < t->split.plane; k++) left_count += merged.count[t->split.axis][k];
+        if (d != SAH_SPLIT || left_count == 0 || left_count == t->task.count) {
+            /* A leaf or a median split: the subtree builder does both. */
+            t->split.axis = -1;
+            if (!add_subtree(j, t)) return false;
+            continue;
+        }
+        t->left_count = left_count;
+        bvh_build_sah_split_boxes(&merged, &t->split, &t->left, &t->right);
+        uint32_t left_at = t->task.first, right_at = t->task.first + left_count;
+        for (uint32_t c = t->chunk0; c < t->chunk0 + t->chunks; c++) {
+            uint32_t chunk_left = 0;
+            for (int k = 0; k < t->split.plane; k++) chunk_left += j->chunk_bins[c].count[t->split.axis][k];
+            j->chunks[c].left_at = left_at;
+            j->chunks[c].right_at = right_at;
+            left_at += chunk_left;
+            right_at += j->chunks[c].count - chunk_left;
+        }
+    }
+    return true;
+}
+
+/* Gives each split node its children pair and makes them the next level. */
+static bool split_level(sah_job *j)
+{
+    j->next_count = 0;
+    for (uint32_t n = 0; n < j->level_count; n++) {
+        top_node *t = &j->level[n];
+        if (!t->chunks || t->split.axis < 0) continue;
+        bvh_build_box_empty(t->left.cmin, t->left.cmax);
+        bvh_build_box_empty(t->right.cmin, t->right.cmax);
+        for (uint32_t c = t->chunk0; c < t->chunk0 + t->chunks; c++) {
+            const sah_chunk *k = &j->chunks[c];
+            bvh_build_box_grow(t->left.cmin, t->left.cmax, k->bounds[0].cmin, k->bounds[0].cmax);
+            bvh_build_box_grow(t->right.cmin, t->right.cmax, k->bounds[1].cmin, k->bounds[1].cmax);
+        }
+        bvh_build_pair(j->b->nodes, t->task.node, t->region, &t->left, &t->right);
+        if (core_grow(j->b->c, (void **)&j->splits, &j->split_cap, j->split_count + 1, sizeof *j->splits) != 0)
+            return false;
+        j->splits[j->split_count++] = (top_split){ .slot = t->task.node, .region = t->region, .first = t->task.first };
+        const bvh_build_bounds *side[2] = { &t->left, &t->right };
+        uint32_t first[2] = { t->task.first, t->task.first + t->left_count };
+        uint32_t count[2] = { t->left_count, t->task.count - t->left_count };
+        /* The left child's descendants take the slots after the pair, the right child's
+         * follow them. */
+        uint32_t region[2] = { t->region + 2, t->region + 2 * t->left_count };
+        for (int s = 0; s < 2; s++) {
+            top_node *child = &j->next[j->next_count++];
+            memset(child, 0, sizeof *child);
+            child->task = (bvh_build_task){ .node = t->region + (uint32_t)s, .first = first[s], .count = count[s],
+                                            .depth = t->task.depth + 1 };
+            memcpy(child->task.cmin, side[s]->cmin, sizeof child->task.cmin);
+            memcpy(child->task.cmax, side[s]->cmax, sizeof child->task.cmax);
+            child->region = region[s];
+        }
+    }
+    return true;
+}
+
+/* Splits the top levels; every node left unsplit is added to j->subtrees. */
+static bool build_top(sah_job *j, const bvh_build_task *root)
+{
+    j->level_count = 1;
+    memset(&j->level[0], 0, sizeof j->level[0]);
+    j->level[0].task = *root;
+    j->level[0].region = 1;
+    for (j->src = 0; j->level_count; j->src = !j->src) {
+        j->chunk_count = 0;
+        for (uint32_t n = 0; n < j->level_count; n++) {
+            top_node *t = &j->level[n];
+            t->chunks = 0;
+            t->split.axis = -1;
+            if (t->task.count <= SAH_TASK_REFS || t->task.depth >= VKRT_MAX_BVH_DEPTH ||
+                !bvh_build_sah_grid(&t->task, &t->grid)) {
+                if (!add_subtree(j, t)) return false;
+                continue;
+            }
+            t->chunk0 = j->chunk_count;
+            t->chunks = div_up(t->task.count, SAH_CHUNK_REFS);
+            for (uint32_t c = 0; c < t->chunks; c++) {
+                uint32_t first = c * SAH_CHUNK_REFS, n_left = t->task.count - first;
+                j->chunks[j->chunk_count++] = (sah_chunk){ .node = n, .first = t->task.first + first,
+                                                           .count = n_left < SAH_CHUNK_REFS ? n_left : SAH_CHUNK_REFS };
+            }
+        }
+        if (!j->chunk_count) break;
+        work_pool_run(j->pool, j->chunk_count, bin_chunk, NULL, j);
+        if (!decide_level(j)) return false;
+        work_pool_run(j->pool, j->chunk_count, partition_chunk, NULL, j);
+        if (!split_level(j)) return false;
+        top_node *swap = j->level;
+        j->level = j->next;
+        j->next = swap;
+        j->level_count = j->next_count;
+    }
+    return true;
+}
+
+/* ---- subtrees ---------------------------------------------------------------------------- */
+
+static void build_subtree_item(void *job, uint32_t i)
+{
+    sah_job *j = job;
+    subtree *t = &j->subtrees[i];
+    if (t->in_scratch)
+        memcpy(j->refs[0] + t->task.first, j->refs[1] + t->task.first, (size_t)t->task.count * sizeof(sah_ref));
+    bvh_build_state s;
+    bvh_build_subtree_state(j->b, t->region, &s);
+    sah_binning bins;
+    bvh_build_sah_binning_empty(&bins);
+    bvh_build_sah_subtree(&s, j->refs[0], t->task, j->max_leaf, &bins, j->pool);
+    t->used = s.node_count - t->region;
+    t->depth = s.depth;
+    atomic_fetch_add_explicit(&j->placed, s.placed, memory_order_relaxed);
+}
+
+static bool report_progress(void *job)
+{
+    sah_job *j = job;
+    return bvh_build_progress(j->b, atomic_load_explicit(&j->placed, memory_order_relaxed));
+}
+
+/* Largest first, so no thread starts a big subtree when the others are about to finish. */
+static int by_size_then_first(const void *pa, const void *pb)
+{
+    const subtree *a = pa, *b = pb;
+    if (a->task.count != b->task.count) return a->task.count > b->task.count ? -1 : 1;
+    return a->task.first < b->task.first ? -1 : a->task.first > b->task.first;
+}
+
+static int by_first(const void *pa, const void *pb)
+{
+    const subtree *a = pa, *b = pb;
+    return a->task.first < b->task.first ? -1 : a->task.first > b->task.first;
+}
+
+static int by_region(const void *pa, const void *pb)
+{
+    const top_split *a = pa, *b = pb;
+    return a->region < b->region ? -1 : a->region > b->region;
+}
+
+/* ---- the node array without its holes ------------------------------------------------------ */
+
+/* The subtree whose references start at `first` (there is one for each split's first). */
+static const subtree *subtree_at(const sah_job *j, uint32_t first)
+{
+    size_t lo = 0, hi = j->subtree_count;
+    while (hi - lo > 1) {
+        size_t mid = lo + (hi - lo) / 2;
+        if (j->subtrees[mid].task.first <= first) lo = mid;
+        else hi = mid;
+    }
+    return &j->subtrees[lo];
+}
+
+static void shift_children(vkrt_gpu_node *n, uint32_t shift)
+{
+    if (n->tri_count == 0) n->left_first -= shift;
+}
+
+/* Renumbers the children of every interior node for the holes squeezed out, then moves the
+ * nodes: into an array of the exact size, or (where that cannot be allocated) down within the
+ * array, which is safe in ascending order because no node moves up. */
+static void compact(sah_job *j)
+{
+    bvh_build_state *b = j->b;
+    vkrt_gpu_node *nodes = b->nodes;
+    qsort(j->subtrees, j->subtree_count, sizeof *j->subtrees, by_first);
+    uint32_t holes = 0;
+    b->depth = 0;
+    for (size_t i = 0; i < j->subtree_count; i++) {
+        subtree *t = &j->subtrees[i];
+        t->shift = holes;
+        holes += 2 * t->task.count - 2 - t->used;
+        if (t->depth > b->depth) b->depth = t->depth;
+        shift_children(&nodes[t->task.node], t->shift);
+        for (uint32_t p = t->region; p < t->region + t->used; p++) shift_children(&nodes[p], t->shift);
+    }
+    for (size_t i = 0; i < j->split_count; i++) {
+        const top_split *s = &j->splits[i];
+        nodes[s->slot].left_first = s->region - subtree_at(j, s->first)->shift;
+    }
+    uint32_t count = b->node_cap - holes;
+    vkrt_gpu_node *exact = core_alloc_array(b->c, count, sizeof *exact);
+    vkrt_gpu_node *to = exact ? exact : nodes;
+    to[0] = nodes[0];
+    /* Ascending source slots: merge the pairs of the splits with the subtrees' ranges. */
+    qsort(j->splits, j->split_count, sizeof *j->splits, by_region);
+    size_t si = 0, ti = 0;
+    while (si < j->split_count || ti < j->subtree_count) {
+        bool pair = ti == j->subtree_count || (si < j->split_count && j->splits[si].region < j->subtrees[ti].region);
+        uint32_t from, n, shift;
+        if (pair) {
+            from = j->splits[si].region;
+            n = 2;
+            shift = subtree_at(j, j->splits[si].first)->shift;
+            si++;
+        } else {
+            from = j->subtrees[ti].region;
+            n = j->subtrees[ti].used;
+            shift = j->subtrees[ti].shift;
+            ti++;
+        }
+        memmove(&to[from - shift], &nodes[from], (size_t)n * sizeof *to);
+    }
+    if (exact) {
+        core_free(b->c, nodes);
+        b->nodes = exact;
+        b->node_cap = count;
+    }
+    b->node_count = count;
+}
+
+/* ---- entry ---------------------------------------------------------------------------------- */
+
+static void job_free(sah_job *j)
+{
+    core *c = j->b->c;
+    work_pool_destroy(j->pool);
+    core_free(c, j->refs[1]);
+    core_free(c, j->level);
+    core_free(c, j->next);
+    core_free(c, j->chunks);
+    core_free(c, j->chunk_bins);
+    core_free(c, j->subtrees);
+    core_free(c, j->splits);
+}
+
+vkrt_result bvh_build_sah_parallel(bvh_build_state *b, const mesh *m, uint32_t max_leaf, uint32_t threads)
+{
+    core *c = b->c;
+    uint32_t n = b->tri_count;
+    sah_job j = { .b = b, .m = m, .max_leaf = max_leaf };
+    j.refs[0] = b->refs;
+    atomic_init(&j.placed, 0);
+    /* A level holds the children of nodes larger than SAH_TASK_REFS, so at most
+     * 2 n / SAH_TASK_REFS; its pieces number at most one per SAH_CHUNK_REFS references plus
+     * one per node (the last, partial piece); the setup's pieces fit in that too. */
+    j.level_cap = 2 * (n / SAH_TASK_REFS) + 2;
+    j.chunk_cap = n / SAH_CHUNK_REFS + n / SAH_TASK_REFS + 2;
+    vkrt_result r = work_pool_create(c, threads, &j.pool);
+    if (r != VKRT_OK) {
+        bvh_build_abort(b);
+        return r;
+    }
+    j.refs[1] = core_alloc_array(c, n, sizeof(sah_ref));
+    j.level = core_alloc_array(c, j.level_cap, sizeof *j.level);
+    j.next = core_alloc_array(c, j.level_cap, sizeof *j.next);
+    j.chunks = core_alloc_array(c, j.chunk_cap, sizeof *j.chunks);
+    j.chunk_bins = core_alloc_array(c, j.chunk_cap, sizeof *j.chunk_bins);
+    if (!j.refs[1] || !j.level || !j.next || !j.chunks || !j.chunk_bins) goto out_of_memory;
+
+    uint32_t setup_chunks = div_up(n, SAH_CHUNK_REFS);
+    work_pool_run(j.pool, setup_chunks, setup_chunk, NULL, &j);
+    bvh_build_bounds root;
+    bvh_build_bounds_empty(&root);
+    for (uint32_t i = 0; i < setup_chunks; i++) bounds_merge(&root, &j.chunks[i].bounds[0]);
+    bvh_build_task task;
+    if (!bvh_build_start(b, &root, &task)) {
+        job_free(&j);
+        return VKRT_OK; /* b->cancelled: bvh_build_finish() reports it */
+    }
+    if (!build_top(&j, &task)) goto out_of_memory;
+
+    qsort(j.subtrees, j.subtree_count, sizeof *j.subtrees, by_size_then_first);
+    bool finished = work_pool_run(j.pool, (uint32_t)j.subtree_count, build_subtree_item, report_progress, &j);
+    if (finished && !b->cancelled) {
+        compact(&j);
+        b->placed = n;
+        bvh_build_progress(b, n);
+    } else {
+        b->cancelled = true;
+    }
+    job_free(&j);
+    return VKRT_OK;
+
+out_of_memory:
+    job_free(&j);
+    bvh_build_abort(b);
+    return core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "out of memory building the BVH of %u triangles on %u threads", n,
+                     threads);
+}
