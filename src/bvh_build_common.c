@@ -68,8 +68,10 @@ bool bvh_build_start(bvh_build_state *b, const bvh_build_bounds *root, bvh_build
 
 bool bvh_build_progress(bvh_build_state *b, uint64_t placed)
 {
-    if (!b->progress || (placed < b->report_at && placed != b->tri_count)) return true;
-    b->report_at = placed + b->report_step;
+    if (!b->progress || placed < b->report_at) return true;
+    /* The next report a step later, or at the end, which is reported once. */
+    if (placed >= b->tri_count) b->report_at = UINT64_MAX;
+    else b->report_at = b->tri_count - placed > b->report_step ? placed + b->report_step : b->tri_count;
     return report(b, (float)((double)placed / (double)b->tri_count));
 }
 
