@@ -10,8 +10,9 @@
 #include "bvh_build_common.h"
 #include "work_pool.h"
 
-/* Wald 2007 measured 16-32 bins within a few percent of a full sweep's tree quality; on the
- * dragon ladder 16 bins cost 1-2% more SAH for 5% less build time, so 32 stay. */
+/* Wald 2007 measured 16-32 bins within a few percent of a full sweep's tree quality. On the
+ * full dragon 16 bins cost 0.7% more SAH (49.10 against 48.77) for 3% less build time, 8 bins
+ * 2.3% more for 6%; 32 stay. */
 #define SAH_BINS 32
 #define SAH_DEFAULT_MAX_LEAF 4
 

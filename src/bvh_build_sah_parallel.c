@@ -62,6 +62,7 @@ typedef struct subtree {
 /* A top node that was split, for renumbering its children at the end. */
 typedef struct top_split {
     uint32_t slot, region, first;
+    uint32_t pair;                 /* where its children go in the compacted array */
 } top_split;
 
 typedef struct sah_job {
@@ -80,6 +81,7 @@ typedef struct sah_job {
     size_t subtree_count, subtree_cap;
     top_split *splits;
     size_t split_count, split_cap;
+    vkrt_gpu_node *exact;          /* the compacted node array while it is filled */
     _Atomic uint64_t placed;       /* triangles in the leaves of finished subtrees */
 } sah_job;
 
@@ -315,9 +317,24 @@ static void shift_children(vkrt_gpu_node *n, uint32_t shift)
     if (n->tri_count == 0) n->left_first -= shift;
 }
 
-/* Renumbers the children of every interior node for the holes squeezed out, then moves the
- * nodes: into an array of the exact size, or (where that cannot be allocated) down within the
- * array, which is safe in ascending order because no node moves up. */
+/* Moves one subtree's nodes into the exact array, renumbering their children on the way. */
+static void copy_subtree(void *job, uint32_t i)
+{
+    sah_job *j = job;
+    const subtree *t = &j->subtrees[i];
+    const vkrt_gpu_node *from = j->b->nodes + t->region;
+    vkrt_gpu_node *to = j->exact + t->region - t->shift;
+    for (uint32_t k = 0; k < t->used; k++) {
+        to[k] = from[k];
+        shift_children(&to[k], t->shift);
+    }
+}
+
+/* Squeezes the unused slots out of the node array: every node moves down by the unused slots
+ * before it, and every interior node's children with it. Into an array of the exact size, one
+ * subtree per worker (its first-touch page faults are most of the cost), or, where that
+ * cannot be allocated, down within the array on the calling thread, which is safe in
+ * ascending order because no node moves up. */
 static void compact(sah_job *j)
 {
     bvh_build_state *b = j->b;
@@ -330,40 +347,43 @@ static void compact(sah_job *j)
         t->shift = holes;
         holes += 2 * t->task.count - 2 - t->used;
         if (t->depth > b->depth) b->depth = t->depth;
-        shift_children(&nodes[t->task.node], t->shift);
-        for (uint32_t p = t->region; p < t->region + t->used; p++) shift_children(&nodes[p], t->shift);
+        shift_children(&nodes[t->task.node], t->shift); /* a subtree's root is in a top pair */
     }
     for (size_t i = 0; i < j->split_count; i++) {
-        const top_split *s = &j->splits[i];
-        nodes[s->slot].left_first = s->region - subtree_at(j, s->first)->shift;
+        top_split *s = &j->splits[i];
+        s->pair = s->region - subtree_at(j, s->first)->shift;
+        nodes[s->slot].left_first = s->pair;
     }
     uint32_t count = b->node_cap - holes;
-    vkrt_gpu_node *exact = core_alloc_array(b->c, count, sizeof *exact);
-    vkrt_gpu_node *to = exact ? exact : nodes;
-    to[0] = nodes[0];
-    /* Ascending source slots: merge the pairs of the splits with the subtrees' ranges. */
-    qsort(j->splits, j->split_count, sizeof *j->splits, by_region);
-    size_t si = 0, ti = 0;
-    while (si < j->split_count || ti < j->subtree_count) {
-        bool pair = ti == j->subtree_count || (si < j->split_count && j->splits[si].region < j->subtrees[ti].region);
-        uint32_t from, n, shift;
-        if (pair) {
-            from = j->splits[si].region;
-            n = 2;
-            shift = subtree_at(j, j->splits[si].first)->shift;
-            si++;
-        } else {
-            from = j->subtrees[ti].region;
-            n = j->subtrees[ti].used;
-            shift = j->subtrees[ti].shift;
-            ti++;
+    j->exact = core_alloc_array(b->c, count, sizeof *j->exact);
+    if (j->exact) {
+        j->exact[0] = nodes[0];
+        for (size_t i = 0; i < j->split_count; i++) {
+            const top_split *s = &j->splits[i];
+            memcpy(&j->exact[s->pair], &nodes[s->region], 2 * sizeof *nodes);
         }
-        memmove(&to[from - shift], &nodes[from], (size_t)n * sizeof *to);
-    }
-    if (exact) {
+        work_pool_run(j->pool, (uint32_t)j->subtree_count, copy_subtree, NULL, j);
         core_free(b->c, nodes);
-        b->nodes = exact;
+        b->nodes = j->exact;
         b->node_cap = count;
+        j->exact = NULL;
+    } else {
+        for (size_t i = 0; i < j->subtree_count; i++) {
+            const subtree *t = &j->subtrees[i];
+            for (uint32_t p = t->region; p < t->region + t->used; p++) shift_children(&nodes[p], t->shift);
+        }
+        /* Ascending source slots: merge the pairs of the splits with the subtrees' ranges. */
+        qsort(j->splits, j->split_count, sizeof *j->splits, by_region);
+        size_t si = 0, ti = 0;
+        while (si < j->split_count || ti < j->subtree_count) {
+            bool pair = ti == j->subtree_count || (si < j->split_count && j->splits[si].region < j->subtrees[ti].region);
+            uint32_t from = pair ? j->splits[si].region : j->subtrees[ti].region;
+            uint32_t n = pair ? 2 : j->subtrees[ti].used;
+            uint32_t to = pair ? j->splits[si].pair : from - j->subtrees[ti].shift;
+            memmove(&nodes[to], &nodes[from], (size_t)n * sizeof *nodes);
+            if (pair) si++;
+            else ti++;
+        }
     }
     b->node_count = count;
 }

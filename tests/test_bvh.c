@@ -652,8 +652,8 @@ static void bvh_out_of_memory_at_every_allocation_without_leak(void)
 /* ---- several threads ----------------------------------------------------------------- */
 
 /* Above SAH_TASK_REFS triangles the SAH builder splits the top levels on all threads and hands
- * subtrees to each; 40000 random triangles make a few levels of both. */
-#define PARALLEL_TEST_TRIS 40000
+ * subtrees to each; 100000 random triangles make a few levels of both. */
+#define PARALLEL_TEST_TRIS 100000
 
 static void check_same_bvh(const char *what, const bvh *a, const bvh *b)
 {
