@@ -96,12 +96,17 @@ void bvh_build_sah_refs(const mesh *m, sah_ref *refs, uint32_t first, uint32_t c
     float4 bmin = box_empty_min(), bmax = box_empty_max(), cmin = bmin, cmax = bmax;
     for (uint32_t i = first; i < first + count; i++) {
         sah_ref *r = &refs[i];
-        bvh_build_tri_box(m->positions + (size_t)i * 9, r->bmin, r->bmax);
-        r->bmin[3] = 0.0f;
+        /* bvh_build_tri_box() on 4 lanes: the same comparisons in the same order. */
+        const float *p = m->positions + (size_t)i * 9;
+        float4 v0 = f4_set(p[0], p[1], p[2], 0.0f), v1 = f4_set(p[3], p[4], p[5], 0.0f);
+        float4 v2 = f4_set(p[6], p[7], p[8], 0.0f);
+        float4 lo = f4_min(v2, f4_min(v1, v0)), hi = f4_max(v2, f4_max(v1, v0));
+        f4_store(r->bmin, lo);
+        f4_store(r->bmax, hi);
         memcpy(&r->bmax[3], &i, sizeof i);
-        bmin = f4_min(f4_load(r->bmin), bmin);
-        bmax = f4_max(f4_load(r->bmax), bmax);
-        float4 c = ref_centroid(r);
+        bmin = f4_min(lo, bmin);
+        bmax = f4_max(hi, bmax);
+        float4 c = f4_add(lo, hi);
         cmin = f4_min(c, cmin);
         cmax = f4_max(c, cmax);
     }

@@ -394,13 +394,8 @@ static void job_free(sah_job *j)
 {
     core *c = j->b->c;
     work_pool_destroy(j->pool);
-    core_free(c, j->refs[1]);
-    core_free(c, j->level);
-    core_free(c, j->next);
-    core_free(c, j->chunks);
-    core_free(c, j->chunk_bins);
-    core_free(c, j->subtrees);
-    core_free(c, j->splits);
+    void *owned[] = { j->refs[1], j->level, j->next, j->chunks, j->chunk_bins, j->subtrees, j->splits };
+    for (size_t i = 0; i < sizeof owned / sizeof owned[0]; i++) core_free(c, owned[i]);
 }
 
 vkrt_result bvh_build_sah_parallel(bvh_build_state *b, const mesh *m, uint32_t max_leaf, uint32_t threads)
