@@ -372,6 +372,30 @@ static bool median_split(sah_ref *refs, const bvh_build_task *t, uint32_t *left_
     return true;
 }
 
+/* A node of two references (a third of all nodes): binning puts them in bins 0 and 31 of
+ * every binnable axis, so the sweep finds one boundary per axis, all of cost
+ * A(r0) + A(r1) and balance 1, and keeps the first axis. The same decision, and the same
+ * partition and child bounds as the general path, without bins. */
+static sah_decision decide_pair(sah_ref *refs, const bvh_build_task *t, const sah_grid *g, const vkrt_gpu_node *node,
+                                uint32_t max_leaf, bvh_build_bounds *left, bvh_build_bounds *right)
+{
+    sah_ref *r = refs + t->first;
+    float cost = box_area4(f4_load(r[0].bmin), f4_load(r[0].bmax)) + box_area4(f4_load(r[1].bmin), f4_load(r[1].bmax));
+    float nmin[3] = { node->bmin.x, node->bmin.y, node->bmin.z };
+    float nmax[3] = { node->bmax.x, node->bmax.y, node->bmax.z };
+    float area = box_area(nmin, nmax);
+    if (2 <= max_leaf && area * 2.0f <= area + cost) return SAH_LEAF;
+    int axis = g->scale[0] != 0.0f ? 0 : g->scale[1] != 0.0f ? 1 : 2;
+    if (ref_centroid_on(&r[1], axis) < ref_centroid_on(&r[0], axis)) {
+        sah_ref tmp = r[0];
+        r[0] = r[1];
+        r[1] = tmp;
+    }
+    bounds_of(r, 0, 1, left);
+    bounds_of(r, 1, 1, right);
+    return SAH_SPLIT;
+}
+
 /* Workers poll for cancellation this often (in leaves): rarely enough to cost nothing. */
 #define SAH_CANCEL_POLL 256
 
@@ -387,7 +411,11 @@ void bvh_build_sah_subtree(bvh_build_state *b, sah_ref *refs, bvh_build_task tas
             sah_grid g;
             sah_split s;
             sah_decision d = SAH_MEDIAN;
-            if (bvh_build_sah_grid(&task, &g)) {
+            bool binnable = bvh_build_sah_grid(&task, &g);
+            if (binnable && task.count == 2) {
+                d = decide_pair(refs, &task, &g, &b->nodes[task.node], max_leaf, &left, &right);
+                left_count = 1;
+            } else if (binnable) {
                 bvh_build_sah_bin(refs + task.first, refs + task.first + task.count, &g, bins);
                 d = bvh_build_sah_decide(bins, &g, &b->nodes[task.node], task.count, max_leaf, &s);
                 if (d == SAH_SPLIT) {
