@@ -289,19 +289,23 @@ void bvh_build_sah_centroid_bounds(const sah_ref *r, const sah_ref *end, bvh_bui
     store_xyz(b->cmax, hi);
 }
 
-/* Partitions task's references so those left of s come first; returns the left count and sets
- * the centroid bounds (only) of both sides. Lomuto's scheme with an unconditional swap: the
- * side a reference falls on is a coin toss the branch predictor loses, a swap is cheap. */
-static uint32_t partition(sah_ref *refs, const bvh_build_task *t, const sah_grid *g, const sah_split *s,
-                          bvh_build_bounds *left, bvh_build_bounds *right)
+/* References classified at a time before they are moved: see bvh_build_sah_partition(). */
+#define SAH_PARTITION_BLOCK 256
+
+uint32_t bvh_build_sah_partition(sah_ref *first, sah_ref *end, const sah_grid *g, const sah_split *s,
+                                 bvh_build_bounds *left, bvh_build_bounds *right)
 {
-    sah_ref *first = refs + t->first, *end = first + t->count, *split = first;
-    for (sah_ref *k = first; k < end; k++) {
-        sah_ref r = *k;
-        bool goes_left = bvh_build_sah_goes_left(&r, g, s);
-        *k = *split;
-        *split = r;
-        split += goes_left;
+    sah_ref *split = first;
+    for (sah_ref *block = first; block < end; block += SAH_PARTITION_BLOCK) {
+        uint32_t n = end - block < SAH_PARTITION_BLOCK ? (uint32_t)(end - block) : SAH_PARTITION_BLOCK;
+        uint8_t goes_left[SAH_PARTITION_BLOCK];
+        for (uint32_t k = 0; k < n; k++) goes_left[k] = bvh_build_sah_goes_left(&block[k], g, s);
+        for (uint32_t k = 0; k < n; k++) {
+            sah_ref r = block[k];
+            block[k] = *split;
+            *split = r;
+            split += goes_left[k];
+        }
     }
     bvh_build_sah_centroid_bounds(first, split, left);
     bvh_build_sah_centroid_bounds(split, end, right);
@@ -420,7 +424,7 @@ void bvh_build_sah_subtree(bvh_build_state *b, sah_ref *refs, bvh_build_task tas
                 d = bvh_build_sah_decide(bins, &g, &b->nodes[task.node], task.count, max_leaf, &s);
                 if (d == SAH_SPLIT) {
                     bvh_build_sah_split_boxes(bins, &s, &left, &right);
-                    left_count = partition(refs, &task, &g, &s, &left, &right);
+                    left_count = bvh_build_sah_partition(refs + task.first, refs + task.first + task.count, &g, &s, &left, &right);
                 }
                 binning_clear(bins);
             } else if (task.count <= max_leaf) {

@@ -81,6 +81,15 @@ sah_decision bvh_build_sah_decide(const sah_binning *b, const sah_grid *g, const
                                   uint32_t max_leaf, sah_split *s);
 /* The boxes of both sides of split s (left/right bmin, bmax; the centroid bounds untouched). */
 void bvh_build_sah_split_boxes(const sah_binning *b, const sah_split *s, bvh_build_bounds *left, bvh_build_bounds *right);
+/* Partitions references [first, end) in place so that those left of split s come first;
+ * returns how many are, and sets the centroid bounds (only) of both sides. Lomuto's scheme
+ * with an unconditional swap: the side a reference falls on is a coin toss the branch
+ * predictor loses, a swap is cheap. The sides of a block are found first, so that where each
+ * swap goes (which depends on every side before it) waits for an addition, not for a
+ * classification; a reference is classified before anything moves it, as swaps touch only
+ * positions already passed. */
+uint32_t bvh_build_sah_partition(sah_ref *first, sah_ref *end, const sah_grid *g, const sah_split *s,
+                                 bvh_build_bounds *left, bvh_build_bounds *right);
 /* Sets b's centroid bounds (cmin, cmax) to those of references [r, end). */
 void bvh_build_sah_centroid_bounds(const sah_ref *r, const sah_ref *end, bvh_build_bounds *b);
 /* Builds the subtree of task serially with state b (whose nodes and references it shares).

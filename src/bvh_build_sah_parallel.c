@@ -10,8 +10,10 @@
  * - the pieces are SAH_CHUNK_REFS references, not one per thread, and their bins and bounds
  *   are merged in piece order by the calling thread, so every split decision sees the same
  *   numbers;
- * - the top levels partition stably into a second reference array (and back, level by
- *   level), so the order of references is a function of the decisions alone;
+ * - the top levels partition in place in two steps: each piece partitions itself, then the
+ *   right-side references left of the node's split point trade places with the left-side
+ *   ones right of it, the k-th of the one kind with the k-th of the other, so the order of
+ *   references is a function of the decisions alone;
  * - every node of n references owns 2n - 2 node slots for its descendants, fixed before it
  *   is built: its children pair first, then the left child's slots, then the right child's.
  *   A subtree fills the start of its slots in the serial builder's depth-first order and
@@ -46,14 +48,25 @@ typedef struct top_node {
 typedef struct sah_chunk {
     uint32_t node;                 /* its top node in the level */
     uint32_t first, count;
-    uint32_t left_at, right_at;    /* where its references go when the node is partitioned */
     bvh_build_bounds bounds[2];    /* of its references (setup) / of its left and right ones */
 } sah_chunk;
+
+/* References on the wrong side of their node's split point after the pieces partitioned
+ * themselves: a run of right-side ones left of it, or of left-side ones right of it. */
+typedef struct sah_run {
+    uint32_t first, count;
+} sah_run;
+
+/* Trades of places for one worker: `count` references from run `right` (offset right_at) of
+ * the level's misplaced right-side runs with as many from run `left` (offset left_at) of the
+ * left-side ones. */
+typedef struct sah_trade {
+    uint32_t right, right_at, left, left_at, count;
+} sah_trade;
 
 typedef struct subtree {
     bvh_build_task task;
     uint32_t region;
-    bool in_scratch;               /* its references are in the scratch array */
     uint32_t used;                 /* slots its build filled, from region on */
     uint32_t depth;                /* of its deepest leaf */
     uint32_t shift;                /* unused slots before it: its nodes move down this far */
@@ -70,13 +83,16 @@ typedef struct sah_job {
     const mesh *m;
     uint32_t max_leaf;
     work_pool *pool;
-    sah_ref *refs[2];              /* b->refs and the scratch array the top levels swap with */
-    uint32_t src;                  /* which of them holds the current level */
+    sah_ref *refs;
     top_node *level, *next;
     uint32_t level_count, next_count, level_cap;
     sah_chunk *chunks;
     sah_binning *chunk_bins;
     uint32_t chunk_count, chunk_cap;
+    sah_run *misplaced[2];         /* right-side runs left of split points, left-side ones right */
+    uint32_t misplaced_count[2];
+    sah_trade *trades;
+    uint32_t trade_count;
     subtree *subtrees;
     size_t subtree_count, subtree_cap;
     top_split *splits;
@@ -93,7 +109,7 @@ static void setup_chunk(void *job, uint32_t i)
 {
     sah_job *j = job;
     uint32_t first = i * SAH_CHUNK_REFS, n = j->b->tri_count - first;
-    bvh_build_sah_refs(j->m, j->refs[0], first, n < SAH_CHUNK_REFS ? n : SAH_CHUNK_REFS, &j->chunks[i].bounds[0]);
+    bvh_build_sah_refs(j->m, j->refs, first, n < SAH_CHUNK_REFS ? n : SAH_CHUNK_REFS, &j->chunks[i].bounds[0]);
 }
 
 static void bounds_merge(bvh_build_bounds *into, const bvh_build_bounds *from)
@@ -108,38 +124,113 @@ static void bin_chunk(void *job, uint32_t i)
 {
     sah_job *j = job;
     const sah_chunk *k = &j->chunks[i];
-    const sah_ref *refs = j->refs[j->src];
     bvh_build_sah_binning_empty(&j->chunk_bins[i]);
-    bvh_build_sah_bin(refs + k->first, refs + k->first + k->count, &j->level[k->node].grid, &j->chunk_bins[i]);
+    bvh_build_sah_bin(j->refs + k->first, j->refs + k->first + k->count, &j->level[k->node].grid, &j->chunk_bins[i]);
 }
 
-/* A stable partition into the other array: each piece writes its left references from
- * left_at and its right ones from right_at, in order, then bounds both runs' centroids. The
- * store address is selected, not branched on: which side a reference falls is a coin toss. */
+/* The first step of a split node's partition: each piece on its own, bounding both sides. */
 static void partition_chunk(void *job, uint32_t i)
 {
     sah_job *j = job;
     sah_chunk *k = &j->chunks[i];
     const top_node *t = &j->level[k->node];
     if (t->split.axis < 0) return;
-    const sah_ref *from = j->refs[j->src] + k->first, *end = from + k->count;
-    sah_ref *to = j->refs[!j->src];
-    uint32_t left = k->left_at, right = k->right_at;
-    for (; from < end; from++) {
-        bool goes_left = bvh_build_sah_goes_left(from, &t->grid, &t->split);
-        to[goes_left ? left : right] = *from;
-        left += goes_left;
-        right += !goes_left;
+    bvh_build_sah_partition(j->refs + k->first, j->refs + k->first + k->count, &t->grid, &t->split, &k->bounds[0],
+                            &k->bounds[1]);
+}
+
+/* The second step: trades places between misplaced references of both sides. */
+static void trade_chunk(void *job, uint32_t i)
+{
+    sah_job *j = job;
+    sah_trade t = j->trades[i];
+    const sah_run *right = j->misplaced[0], *left = j->misplaced[1];
+    while (t.count) {
+        uint32_t n = t.count;
+        if (right[t.right].count - t.right_at < n) n = right[t.right].count - t.right_at;
+        if (left[t.left].count - t.left_at < n) n = left[t.left].count - t.left_at;
+        sah_ref *a = j->refs + right[t.right].first + t.right_at, *b = j->refs + left[t.left].first + t.left_at;
+        for (uint32_t k = 0; k < n; k++) {
+            sah_ref tmp = a[k];
+            a[k] = b[k];
+            b[k] = tmp;
+        }
+        t.count -= n;
+        t.right_at += n;
+        t.left_at += n;
+        if (t.right_at == right[t.right].count) {
+            t.right++;
+            t.right_at = 0;
+        }
+        if (t.left_at == left[t.left].count) {
+            t.left++;
+            t.left_at = 0;
+        }
     }
-    bvh_build_sah_centroid_bounds(to + k->left_at, to + left, &k->bounds[0]);
-    bvh_build_sah_centroid_bounds(to + k->right_at, to + right, &k->bounds[1]);
+}
+
+static uint32_t chunk_left_count(const sah_job *j, const top_node *t, uint32_t chunk)
+{
+    uint32_t n = 0;
+    for (int k = 0; k < t->split.plane; k++) n += j->chunk_bins[chunk].count[t->split.axis][k];
+    return n;
+}
+
+/* Lists the misplaced runs of split node t (from how many left-side references each piece
+ * holds) and cuts their trades into jobs of SAH_CHUNK_REFS. */
+static void plan_trades(sah_job *j, const top_node *t)
+{
+    uint32_t split_at = t->task.first + t->left_count;
+    uint32_t first_run[2] = { j->misplaced_count[0], j->misplaced_count[1] };
+    for (uint32_t c = 0; c < t->chunks; c++) {
+        const sah_chunk *k = &j->chunks[t->chunk0 + c];
+        uint32_t mid = k->first + chunk_left_count(j, t, t->chunk0 + c), end = k->first + k->count;
+        if (mid < split_at) { /* right-side references of this piece lie left of the split */
+            uint32_t stop = end < split_at ? end : split_at;
+            if (stop > mid) j->misplaced[0][j->misplaced_count[0]++] = (sah_run){ mid, stop - mid };
+        } else if (mid > split_at) { /* left-side ones lie right of it */
+            uint32_t start = k->first > split_at ? k->first : split_at;
+            if (mid > start) j->misplaced[1][j->misplaced_count[1]++] = (sah_run){ start, mid - start };
+        }
+    }
+    uint32_t total = 0;
+    for (uint32_t r = first_run[0]; r < j->misplaced_count[0]; r++) total += j->misplaced[0][r].count;
+    /* Walk both lists in step, starting a job every SAH_CHUNK_REFS trades. */
+    sah_trade at = { .right = first_run[0], .left = first_run[1] };
+    for (uint32_t done = 0; done < total;) {
+        uint32_t n = total - done < SAH_CHUNK_REFS ? total - done : SAH_CHUNK_REFS;
+        sah_trade job = at;
+        job.count = n;
+        j->trades[j->trade_count++] = job;
+        done += n;
+        for (uint32_t left = n; left;) { /* advance the right-side cursor */
+            uint32_t step = j->misplaced[0][at.right].count - at.right_at;
+            if (step > left) step = left;
+            at.right_at += step;
+            left -= step;
+            if (at.right_at == j->misplaced[0][at.right].count) {
+                at.right++;
+                at.right_at = 0;
+            }
+        }
+        for (uint32_t left = n; left;) { /* and the left-side one */
+            uint32_t step = j->misplaced[1][at.left].count - at.left_at;
+            if (step > left) step = left;
+            at.left_at += step;
+            left -= step;
+            if (at.left_at == j->misplaced[1][at.left].count) {
+                at.left++;
+                at.left_at = 0;
+            }
+        }
+    }
 }
 
 static bool add_subtree(sah_job *j, const top_node *t)
 {
     if (core_grow(j->b->c, (void **)&j->subtrees, &j->subtree_cap, j->subtree_count + 1, sizeof *j->subtrees) != 0)
         return false;
-    j->subtrees[j->subtree_count++] = (subtree){ .task = t->task, .region = t->region, .in_scratch = j->src == 1 };
+    j->subtrees[j->subtree_count++] = (subtree){ .task = t->task, .region = t->region };
     return true;
 }
 
@@ -165,15 +256,7 @@ static bool decide_level(sah_job *j)
         }
         t->left_count = left_count;
         bvh_build_sah_split_boxes(&merged, &t->split, &t->left, &t->right);
-        uint32_t left_at = t->task.first, right_at = t->task.first + left_count;
-        for (uint32_t c = t->chunk0; c < t->chunk0 + t->chunks; c++) {
-            uint32_t chunk_left = 0;
-            for (int k = 0; k < t->split.plane; k++) chunk_left += j->chunk_bins[c].count[t->split.axis][k];
-            j->chunks[c].left_at = left_at;
-            j->chunks[c].right_at = right_at;
-            left_at += chunk_left;
-            right_at += j->chunks[c].count - chunk_left;
-        }
+        plan_trades(j, t);
     }
     return true;
 }
@@ -222,8 +305,10 @@ static bool build_top(sah_job *j, const bvh_build_task *root)
     memset(&j->level[0], 0, sizeof j->level[0]);
     j->level[0].task = *root;
     j->level[0].region = 1;
-    for (j->src = 0; j->level_count; j->src = !j->src) {
+    while (j->level_count) {
         j->chunk_count = 0;
+        j->misplaced_count[0] = j->misplaced_count[1] = 0;
+        j->trade_count = 0;
         for (uint32_t n = 0; n < j->level_count; n++) {
             top_node *t = &j->level[n];
             t->chunks = 0;
@@ -245,6 +330,7 @@ static bool build_top(sah_job *j, const bvh_build_task *root)
         work_pool_run(j->pool, j->chunk_count, bin_chunk, NULL, j);
         if (!decide_level(j)) return false;
         work_pool_run(j->pool, j->chunk_count, partition_chunk, NULL, j);
+        work_pool_run(j->pool, j->trade_count, trade_chunk, NULL, j);
         if (!split_level(j)) return false;
         top_node *swap = j->level;
         j->level = j->next;
@@ -260,13 +346,11 @@ static void build_subtree_item(void *job, uint32_t i)
 {
     sah_job *j = job;
     subtree *t = &j->subtrees[i];
-    if (t->in_scratch)
-        memcpy(j->refs[0] + t->task.first, j->refs[1] + t->task.first, (size_t)t->task.count * sizeof(sah_ref));
     bvh_build_state s;
     bvh_build_subtree_state(j->b, t->region, &s);
     sah_binning bins;
     bvh_build_sah_binning_empty(&bins);
-    bvh_build_sah_subtree(&s, j->refs[0], t->task, j->max_leaf, &bins, j->pool);
+    bvh_build_sah_subtree(&s, j->refs, t->task, j->max_leaf, &bins, j->pool);
     t->used = s.node_count - t->region;
     t->depth = s.depth;
     atomic_fetch_add_explicit(&j->placed, s.placed, memory_order_relaxed);
@@ -394,7 +478,8 @@ static void job_free(sah_job *j)
 {
     core *c = j->b->c;
     work_pool_destroy(j->pool);
-    void *owned[] = { j->refs[1], j->level, j->next, j->chunks, j->chunk_bins, j->subtrees, j->splits };
+    void *owned[] = { j->level, j->next, j->chunks, j->chunk_bins, j->misplaced[0], j->misplaced[1], j->trades,
+                      j->subtrees, j->splits };
     for (size_t i = 0; i < sizeof owned / sizeof owned[0]; i++) core_free(c, owned[i]);
 }
 
@@ -403,7 +488,7 @@ vkrt_result bvh_build_sah_parallel(bvh_build_state *b, const mesh *m, uint32_t m
     core *c = b->c;
     uint32_t n = b->tri_count;
     sah_job j = { .b = b, .m = m, .max_leaf = max_leaf };
-    j.refs[0] = b->refs;
+    j.refs = b->refs;
     atomic_init(&j.placed, 0);
     /* A level holds the children of nodes larger than SAH_TASK_REFS, so at most
      * 2 n / SAH_TASK_REFS; its pieces number at most one per SAH_CHUNK_REFS references plus
@@ -415,12 +500,17 @@ vkrt_result bvh_build_sah_parallel(bvh_build_state *b, const mesh *m, uint32_t m
         bvh_build_abort(b);
         return r;
     }
-    j.refs[1] = core_alloc_array(c, n, sizeof(sah_ref));
     j.level = core_alloc_array(c, j.level_cap, sizeof *j.level);
     j.next = core_alloc_array(c, j.level_cap, sizeof *j.next);
     j.chunks = core_alloc_array(c, j.chunk_cap, sizeof *j.chunks);
     j.chunk_bins = core_alloc_array(c, j.chunk_cap, sizeof *j.chunk_bins);
-    if (!j.refs[1] || !j.level || !j.next || !j.chunks || !j.chunk_bins) goto out_of_memory;
+    /* Each piece adds at most one misplaced run; the trades of a node come in jobs of
+     * SAH_CHUNK_REFS, at most half its references, so they fit the pieces' bound too. */
+    j.misplaced[0] = core_alloc_array(c, j.chunk_cap, sizeof *j.misplaced[0]);
+    j.misplaced[1] = core_alloc_array(c, j.chunk_cap, sizeof *j.misplaced[1]);
+    j.trades = core_alloc_array(c, j.chunk_cap, sizeof *j.trades);
+    if (!j.level || !j.next || !j.chunks || !j.chunk_bins || !j.misplaced[0] || !j.misplaced[1] || !j.trades)
+        goto out_of_memory;
 
     uint32_t setup_chunks = div_up(n, SAH_CHUNK_REFS);
     work_pool_run(j.pool, setup_chunks, setup_chunk, NULL, &j);
