@@ -57,11 +57,16 @@ typedef struct sah_run {
     uint32_t first, count;
 } sah_run;
 
-/* Trades of places for one worker: `count` references from run `right` (offset right_at) of
- * the level's misplaced right-side runs with as many from run `left` (offset left_at) of the
- * left-side ones. */
+/* A position in a list of runs: reference `at` of run `run`. */
+typedef struct run_cursor {
+    uint32_t run, at;
+} run_cursor;
+
+/* Trades of places for one worker: `count` references of the level's misplaced right-side
+ * runs from `right` on with as many of the left-side ones from `left` on. */
 typedef struct sah_trade {
-    uint32_t right, right_at, left, left_at, count;
+    run_cursor right, left;
+    uint32_t count;
 } sah_trade;
 
 typedef struct subtree {
@@ -139,6 +144,22 @@ static void partition_chunk(void *job, uint32_t i)
                             &k->bounds[1]);
 }
 
+/* References left in the cursor's run. */
+static uint32_t run_rest(const sah_run *runs, run_cursor c) { return runs[c.run].count - c.at; }
+
+static void cursor_advance(const sah_run *runs, run_cursor *c, uint32_t n)
+{
+    while (n) {
+        uint32_t step = run_rest(runs, *c) < n ? run_rest(runs, *c) : n;
+        c->at += step;
+        n -= step;
+        if (c->at == runs[c->run].count) {
+            c->run++;
+            c->at = 0;
+        }
+    }
+}
+
 /* The second step: trades places between misplaced references of both sides. */
 static void trade_chunk(void *job, uint32_t i)
 {
@@ -147,25 +168,17 @@ static void trade_chunk(void *job, uint32_t i)
     const sah_run *right = j->misplaced[0], *left = j->misplaced[1];
     while (t.count) {
         uint32_t n = t.count;
-        if (right[t.right].count - t.right_at < n) n = right[t.right].count - t.right_at;
-        if (left[t.left].count - t.left_at < n) n = left[t.left].count - t.left_at;
-        sah_ref *a = j->refs + right[t.right].first + t.right_at, *b = j->refs + left[t.left].first + t.left_at;
+        if (run_rest(right, t.right) < n) n = run_rest(right, t.right);
+        if (run_rest(left, t.left) < n) n = run_rest(left, t.left);
+        sah_ref *a = j->refs + right[t.right.run].first + t.right.at, *b = j->refs + left[t.left.run].first + t.left.at;
         for (uint32_t k = 0; k < n; k++) {
             sah_ref tmp = a[k];
             a[k] = b[k];
             b[k] = tmp;
         }
         t.count -= n;
-        t.right_at += n;
-        t.left_at += n;
-        if (t.right_at == right[t.right].count) {
-            t.right++;
-            t.right_at = 0;
-        }
-        if (t.left_at == left[t.left].count) {
-            t.left++;
-            t.left_at = 0;
-        }
+        cursor_advance(right, &t.right, n);
+        cursor_advance(left, &t.left, n);
     }
 }
 
@@ -196,33 +209,13 @@ static void plan_trades(sah_job *j, const top_node *t)
     uint32_t total = 0;
     for (uint32_t r = first_run[0]; r < j->misplaced_count[0]; r++) total += j->misplaced[0][r].count;
     /* Walk both lists in step, starting a job every SAH_CHUNK_REFS trades. */
-    sah_trade at = { .right = first_run[0], .left = first_run[1] };
+    sah_trade at = { .right = { first_run[0], 0 }, .left = { first_run[1], 0 } };
     for (uint32_t done = 0; done < total;) {
-        uint32_t n = total - done < SAH_CHUNK_REFS ? total - done : SAH_CHUNK_REFS;
-        sah_trade job = at;
-        job.count = n;
-        j->trades[j->trade_count++] = job;
-        done += n;
-        for (uint32_t left = n; left;) { /* advance the right-side cursor */
-            uint32_t step = j->misplaced[0][at.right].count - at.right_at;
-            if (step > left) step = left;
-            at.right_at += step;
-            left -= step;
-            if (at.right_at == j->misplaced[0][at.right].count) {
-                at.right++;
-                at.right_at = 0;
-            }
-        }
-        for (uint32_t left = n; left;) { /* and the left-side one */
-            uint32_t step = j->misplaced[1][at.left].count - at.left_at;
-            if (step > left) step = left;
-            at.left_at += step;
-            left -= step;
-            if (at.left_at == j->misplaced[1][at.left].count) {
-                at.left++;
-                at.left_at = 0;
-            }
-        }
+        at.count = total - done < SAH_CHUNK_REFS ? total - done : SAH_CHUNK_REFS;
+        j->trades[j->trade_count++] = at;
+        done += at.count;
+        cursor_advance(j->misplaced[0], &at.right, at.count);
+        cursor_advance(j->misplaced[1], &at.left, at.count);
     }
 }
 
