@@ -140,7 +140,8 @@ vkrt_result bvh_build_finish(bvh_build_state *b, bvh *out)
         return r;
     }
     const unsigned char *tri = (const unsigned char *)b->refs + b->tri_offset;
-    for (uint32_t k = 0; k < b->tri_count; k++) memcpy(&b->order[k], tri + k * b->ref_size, sizeof b->order[k]);
+    for (uint32_t k = 0; k < b->tri_count && !b->order_filled; k++)
+        memcpy(&b->order[k], tri + k * b->ref_size, sizeof b->order[k]);
     core_free(c, b->refs);
     /* The array was sized for the worst case (one triangle per leaf); give back the rest. A
      * failed shrink only wastes memory, so it is not an error. */

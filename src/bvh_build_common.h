@@ -52,6 +52,7 @@ typedef struct bvh_build_state {
     vkrt_gpu_node *nodes;       /* node_cap entries (one triangle per leaf at worst) */
     uint32_t node_count, node_cap;
     uint32_t *order;
+    bool order_filled;          /* the builder filled order itself; else bvh_build_finish() does */
     uint32_t depth;             /* of the deepest leaf so far */
     vkrt_progress_fn progress;  /* may be NULL */
     void *progress_user;

@@ -20,7 +20,7 @@
  * Loaded as two 4-lane vectors; the fourth lanes carry 0 and the triangle index. */
 typedef struct sah_ref {
     float bmin[4]; /* [3] is 0 */
-    float bmax[4]; /* [3] holds the bits of the triangle index (bvh_build_sah_ref_tri()) */
+    float bmax[4]; /* [3] holds the bits of the triangle index (SAH_REF_TRI_OFFSET) */
 } sah_ref;
 
 #define SAH_REF_TRI_OFFSET (offsetof(sah_ref, bmax) + 3 * sizeof(float))

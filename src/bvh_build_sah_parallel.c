@@ -394,7 +394,8 @@ static void shift_children(vkrt_gpu_node *n, uint32_t shift)
     if (n->tri_count == 0) n->left_first -= shift;
 }
 
-/* Moves one subtree's nodes into the exact array, renumbering their children on the way. */
+/* Moves one subtree's nodes into the exact array, renumbering their children on the way, and
+ * reads its part of the triangle order (bvh_build_finish() would on one thread). */
 static void copy_subtree(void *job, uint32_t i)
 {
     sah_job *j = job;
@@ -405,6 +406,8 @@ static void copy_subtree(void *job, uint32_t i)
         to[k] = from[k];
         shift_children(&to[k], t->shift);
     }
+    for (uint32_t k = t->task.first; k < t->task.first + t->task.count; k++)
+        memcpy(&j->b->order[k], &j->refs[k].bmax[3], sizeof j->b->order[k]);
 }
 
 /* Squeezes the unused slots out of the node array: every node moves down by the unused slots
@@ -440,6 +443,7 @@ static void compact(sah_job *j)
             memcpy(&j->exact[s->pair], &nodes[s->region], 2 * sizeof *nodes);
         }
         work_pool_run(j->pool, (uint32_t)j->subtree_count, copy_subtree, NULL, j);
+        b->order_filled = true;
         core_free(b->c, nodes);
         b->nodes = j->exact;
         b->node_cap = count;
