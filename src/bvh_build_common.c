@@ -45,6 +45,11 @@ vkrt_result bvh_build_begin(bvh_build_state *b, core *c, const mesh *m, const bv
         free_all(b);
         return r;
     }
+    /* All three are written within the build: the references and the order whole, the nodes
+     * up to the tree's size (and in between, on several threads). */
+    core_advise_huge_pages(b->refs, (size_t)n * ref_size);
+    core_advise_huge_pages(b->nodes, (size_t)b->node_cap * sizeof *b->nodes);
+    core_advise_huge_pages(b->order, (size_t)n * sizeof *b->order);
     return VKRT_OK;
 }
 
@@ -149,6 +154,7 @@ vkrt_result bvh_build_finish(bvh_build_state *b, bvh *out)
     if (b->node_count < b->node_cap) {
         vkrt_gpu_node *exact = core_alloc_array(c, b->node_count, sizeof *exact);
         if (exact) {
+            core_advise_huge_pages(exact, (size_t)b->node_count * sizeof *exact);
             memcpy(exact, nodes, (size_t)b->node_count * sizeof *exact);
             core_free(c, nodes);
             nodes = exact;
