@@ -1,7 +1,8 @@
 /* The binned SAH builder on several threads, for meshes of more than SAH_TASK_REFS triangles.
  *
- * The classic two-phase scheme (Wald 2007, section 4.3; Embree's BVH builders split the same
- * way): the top levels, where nodes are few and large, are split level by level with all
+ * The two-phase scheme of I. Wald, "Fast Construction of SAH BVHs on the Intel Many
+ * Integrated Core (MIC) Architecture", IEEE TVCG 18(1), 2012 (Embree's builders work the
+ * same way): the top levels, where nodes are few and large, are split level by level with all
  * threads binning and partitioning fixed pieces of each node's references together; below
  * SAH_TASK_REFS references a node is a subtree that one thread builds serially
  * (bvh_build_sah_subtree()), largest subtrees first.
@@ -21,8 +22,10 @@
  *   of one thread building the same tree depth first (children adjacent, node 0 the root).
  *
  * Progress reports and the user's callback stay on the calling thread (work_pool.h); workers
- * poll for cancellation. Every allocation here is made before any worker runs and can fail
- * cleanly: the build then frees everything and returns VKRT_ERROR_OUT_OF_MEMORY. */
+ * poll for cancellation. Every allocation is made on the calling thread between the workers'
+ * jobs, and each can fail cleanly: the build then frees everything and returns
+ * VKRT_ERROR_OUT_OF_MEMORY (the compacted node array excepted: without it the nodes are
+ * moved down in place). */
 #include <stdatomic.h>
 #include <stdlib.h>
 #include <string.h>
@@ -412,9 +415,9 @@ static void copy_subtree(void *job, uint32_t i)
 
 /* Squeezes the unused slots out of the node array: every node moves down by the unused slots
  * before it, and every interior node's children with it. Into an array of the exact size, one
- * subtree per worker (its first-touch page faults are most of the cost), or, where that
- * cannot be allocated, down within the array on the calling thread, which is safe in
- * ascending order because no node moves up. */
+ * subtree per worker (the copy touches a whole array of fresh memory), or, where that cannot
+ * be allocated, down within the array on the calling thread, which is safe in ascending order
+ * because no node moves up. */
 static void compact(sah_job *j)
 {
     bvh_build_state *b = j->b;

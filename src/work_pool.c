@@ -111,6 +111,7 @@ uint32_t work_pool_threads(const work_pool *p) { return p->workers_started + 1; 
 
 bool work_pool_run(work_pool *p, uint32_t items, work_item_fn fn, work_between_fn between, void *job)
 {
+    if (!items) return true;
     if (p->workers_started) {
         pthread_mutex_lock(&p->lock);
         /* A worker that joined the last job late may still be claiming from its counter. */
