@@ -164,11 +164,23 @@ static void binning_clear(sah_binning *b)
     }
 }
 
+static inline void bin_grow(sah_binning *b, int axis, int k, float4 lo, float4 hi, uint32_t *used)
+{
+    sah_bin *bin = &b->bin[axis][k];
+    f4_store(bin->bmin, f4_min(lo, f4_load(bin->bmin)));
+    f4_store(bin->bmax, f4_max(hi, f4_load(bin->bmax)));
+    b->count[axis][k]++;
+    *used |= 1u << k;
+}
+
 void bvh_build_sah_bin(const sah_ref *r, const sah_ref *end, const sah_grid *g, sah_binning *b)
 {
     const float4 origin = f4_load(g->origin), scale = f4_load(g->scale);
     const float4 zero = f4_set(0.0f, 0.0f, 0.0f, 0.0f);
     const float4 last = f4_set(SAH_BINS - 1, SAH_BINS - 1, SAH_BINS - 1, SAH_BINS - 1);
+    /* The masks stay in registers (one variable per axis, the axes written out): updated in
+     * memory, each would wait for its previous store. */
+    uint32_t used0 = b->used[0], used1 = b->used[1], used2 = b->used[2];
     for (; r < end; r++) {
         float4 lo = f4_load(r->bmin), hi = f4_load(r->bmax);
         /* bvh_build_sah_bin_index() on all three axes at once (and 0 in lane 3). */
@@ -176,14 +188,13 @@ void bvh_build_sah_bin(const sah_ref *r, const sah_ref *end, const sah_grid *g, 
         f = f4_min(f4_max(f, zero), last);
         int32_t k[4];
         f4_truncate(f, k);
-        for (int a = 0; a < 3; a++) {
-            sah_bin *bin = &b->bin[a][k[a]];
-            f4_store(bin->bmin, f4_min(lo, f4_load(bin->bmin)));
-            f4_store(bin->bmax, f4_max(hi, f4_load(bin->bmax)));
-            b->count[a][k[a]]++;
-            b->used[a] |= 1u << k[a];
-        }
+        bin_grow(b, 0, k[0], lo, hi, &used0);
+        bin_grow(b, 1, k[1], lo, hi, &used1);
+        bin_grow(b, 2, k[2], lo, hi, &used2);
     }
+    b->used[0] = used0;
+    b->used[1] = used1;
+    b->used[2] = used2;
 }
 
 void bvh_build_sah_binning_merge(sah_binning *into, const sah_binning *from)
