@@ -496,6 +496,8 @@ vkrt_result bvh_build_sah_parallel(bvh_build_state *b, const mesh *m, uint32_t m
      * one per node (the last, partial piece); the setup's pieces fit in that too. */
     j.level_cap = 2 * (n / SAH_TASK_REFS) + 2;
     j.chunk_cap = n / SAH_CHUNK_REFS + n / SAH_TASK_REFS + 2;
+    /* More threads than the root has pieces would find nothing to do at the top. */
+    if (threads > n / SAH_CHUNK_REFS + 1) threads = n / SAH_CHUNK_REFS + 1;
     vkrt_result r = work_pool_create(c, threads, &j.pool);
     if (r != VKRT_OK) {
         bvh_build_abort(b);
