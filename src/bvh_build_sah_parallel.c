@@ -33,8 +33,8 @@
 #include "bvh_build_sah.h"
 
 /* Pieces of the top levels: large enough that a piece's bins (3.5 KB) are merged at a small
- * cost per reference, small enough for 2-16 threads to share a node of 2 * SAH_TASK_REFS. */
-#define SAH_CHUNK_REFS 8192
+ * cost per reference, small enough that the smallest node split here has three to share. */
+#define SAH_CHUNK_REFS 4096
 
 /* A node of the top levels, or the root of a subtree. */
 typedef struct top_node {
