@@ -258,6 +258,7 @@ vkrt_result vkrt_scene_create(vkrt_context *ctx, const vkrt_scene_desc *desc, vk
     bvh_build_desc bd = {
         .builder = d.builder,
         .max_leaf_size = d.max_leaf_size,
+        .threads = ctx->cpu_threads,
         .progress = d.progress,
         .progress_user = d.progress_user,
     };

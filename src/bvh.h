@@ -24,7 +24,10 @@ typedef struct bvh_build_desc {
     vkrt_bvh_builder builder;  /* VKRT_BVH_BUILDER_DEFAULT means binned SAH */
     uint32_t max_leaf_size;    /* 0: 4. SAH: leaves larger than this are always split when
                                   any split exists */
-    vkrt_progress_fn progress; /* may be NULL; false cancels */
+    uint32_t threads;          /* 0: 1. Binned SAH: the threads that build a mesh of more
+                                  than SAH_TASK_REFS (8192) triangles; the BVH is the same,
+                                  bit for bit, for any count */
+    vkrt_progress_fn progress; /* may be NULL; false cancels; called on the calling thread */
     void *progress_user;
 } bvh_build_desc;
 

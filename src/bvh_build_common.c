@@ -45,6 +45,11 @@ vkrt_result bvh_build_begin(bvh_build_state *b, core *c, const mesh *m, const bv
         free_all(b);
         return r;
     }
+    /* The references and the order are written whole at once. Not the nodes: a parallel
+     * build leaves holes in them, which huge pages would fill (on the 1e7-triangle scene that
+     * cost more system time than the faults it saved). */
+    core_advise_huge_pages(b->refs, (size_t)n * ref_size);
+    core_advise_huge_pages(b->order, (size_t)n * sizeof *b->order);
     return VKRT_OK;
 }
 
@@ -66,6 +71,29 @@ bool bvh_build_start(bvh_build_state *b, const bvh_build_bounds *root, bvh_build
     return !b->progress || report(b, 0.0f);
 }
 
+bool bvh_build_progress(bvh_build_state *b, uint64_t placed)
+{
+    if (!b->progress || placed < b->report_at) return true;
+    /* The next report a step later, or at the end, which is reported once. */
+    if (placed >= b->tri_count) b->report_at = UINT64_MAX;
+    else b->report_at = b->tri_count - placed > b->report_step ? placed + b->report_step : b->tri_count;
+    return report(b, (float)((double)placed / (double)b->tri_count));
+}
+
+void bvh_build_subtree_state(const bvh_build_state *b, uint32_t region, bvh_build_state *sub)
+{
+    memset(sub, 0, offsetof(bvh_build_state, stack));
+    sub->c = b->c;
+    sub->tri_count = b->tri_count;
+    sub->refs = b->refs;
+    sub->ref_size = b->ref_size;
+    sub->tri_offset = b->tri_offset;
+    sub->nodes = b->nodes;
+    sub->node_count = region;
+    sub->node_cap = b->node_cap;
+    sub->order = b->order;
+}
+
 bool bvh_build_leaf(bvh_build_state *b, bvh_build_task *task)
 {
     vkrt_gpu_node *node = &b->nodes[task->node];
@@ -73,25 +101,27 @@ bool bvh_build_leaf(bvh_build_state *b, bvh_build_task *task)
     node->tri_count = task->count;
     if (task->depth > b->depth) b->depth = task->depth;
     b->placed += task->count;
-    if (b->progress && (b->placed >= b->report_at || b->placed == b->tri_count)) {
-        if (!report(b, (float)((double)b->placed / (double)b->tri_count))) return false;
-        b->report_at = b->placed + b->report_step;
-    }
+    if (b->progress && !bvh_build_progress(b, b->placed)) return false;
     if (b->sp == 0) return false;
     *task = b->stack[--b->sp];
     return true;
 }
 
+void bvh_build_pair(vkrt_gpu_node *nodes, uint32_t node, uint32_t pair, const bvh_build_bounds *left,
+                    const bvh_build_bounds *right)
+{
+    nodes[node].left_first = pair;
+    nodes[node].tri_count = 0;
+    set_box(&nodes[pair], left->bmin, left->bmax);
+    set_box(&nodes[pair + 1], right->bmin, right->bmax);
+}
+
 void bvh_build_split(bvh_build_state *b, bvh_build_task *task, uint32_t left_count,
                      const bvh_build_bounds *left, const bvh_build_bounds *right)
 {
-    vkrt_gpu_node *node = &b->nodes[task->node];
     uint32_t first_child = b->node_count;
     b->node_count += 2;
-    node->left_first = first_child;
-    node->tri_count = 0;
-    set_box(&b->nodes[first_child], left->bmin, left->bmax);
-    set_box(&b->nodes[first_child + 1], right->bmin, right->bmax);
+    bvh_build_pair(b->nodes, task->node, first_child, left, right);
     bvh_build_task r = { .node = first_child + 1, .first = task->first + left_count,
                          .count = task->count - left_count, .depth = task->depth + 1 };
     memcpy(r.cmin, right->cmin, sizeof r.cmin);
@@ -104,6 +134,8 @@ void bvh_build_split(bvh_build_state *b, bvh_build_task *task, uint32_t left_cou
     memcpy(task->cmax, left->cmax, sizeof task->cmax);
 }
 
+void bvh_build_abort(bvh_build_state *b) { free_all(b); }
+
 vkrt_result bvh_build_finish(bvh_build_state *b, bvh *out)
 {
     core *c = b->c;
@@ -113,7 +145,8 @@ vkrt_result bvh_build_finish(bvh_build_state *b, bvh *out)
         return r;
     }
     const unsigned char *tri = (const unsigned char *)b->refs + b->tri_offset;
-    for (uint32_t k = 0; k < b->tri_count; k++) memcpy(&b->order[k], tri + k * b->ref_size, sizeof b->order[k]);
+    for (uint32_t k = 0; k < b->tri_count && !b->order_filled; k++)
+        memcpy(&b->order[k], tri + k * b->ref_size, sizeof b->order[k]);
     core_free(c, b->refs);
     /* The array was sized for the worst case (one triangle per leaf); give back the rest. A
      * failed shrink only wastes memory, so it is not an error. */
@@ -121,6 +154,7 @@ vkrt_result bvh_build_finish(bvh_build_state *b, bvh *out)
     if (b->node_count < b->node_cap) {
         vkrt_gpu_node *exact = core_alloc_array(c, b->node_count, sizeof *exact);
         if (exact) {
+            core_advise_huge_pages(exact, (size_t)b->node_count * sizeof *exact);
             memcpy(exact, nodes, (size_t)b->node_count * sizeof *exact);
             core_free(c, nodes);
             nodes = exact;

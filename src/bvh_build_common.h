@@ -52,6 +52,7 @@ typedef struct bvh_build_state {
     vkrt_gpu_node *nodes;       /* node_cap entries (one triangle per leaf at worst) */
     uint32_t node_count, node_cap;
     uint32_t *order;
+    bool order_filled;          /* the builder filled order itself; else bvh_build_finish() does */
     uint32_t depth;             /* of the deepest leaf so far */
     vkrt_progress_fn progress;  /* may be NULL */
     void *progress_user;
@@ -121,6 +122,19 @@ bool bvh_build_start(bvh_build_state *b, const bvh_build_bounds *root, bvh_build
 /* Makes task's node a leaf, reports progress about every 1/64 of the triangles, and loads the
  * next task into *task. Returns false when no task is left or the callback cancels. */
 bool bvh_build_leaf(bvh_build_state *b, bvh_build_task *task);
+/* Reports progress for `placed` triangles in finished leaves (about every 1/64 of them, and
+ * once all are placed) when the build has a progress callback. Returns false when the callback
+ * cancels; the build then ends at bvh_build_finish(). Calling thread only. */
+bool bvh_build_progress(bvh_build_state *b, uint64_t placed);
+/* Fills *sub for building one subtree of b, possibly on another thread: it shares b's nodes
+ * and references, allocates child pairs from node `region` on, starts with an empty stack and
+ * no deepest leaf, counts its own placed triangles and reports no progress. */
+void bvh_build_subtree_state(const bvh_build_state *b, uint32_t region, bvh_build_state *sub);
+/* Makes nodes[node] interior with the children nodes[pair] (box of left) and nodes[pair + 1]
+ * (box of right): bvh_build_split() without the task stack, for builders that choose where a
+ * pair goes. */
+void bvh_build_pair(vkrt_gpu_node *nodes, uint32_t node, uint32_t pair, const bvh_build_bounds *left,
+                    const bvh_build_bounds *right);
 /* Gives task's node two children: the first left_count references with bounds left, the rest
  * with bounds right. The right child is pushed, and *task becomes the left child. */
 void bvh_build_split(bvh_build_state *b, bvh_build_task *task, uint32_t left_count,
@@ -129,5 +143,7 @@ void bvh_build_split(bvh_build_state *b, bvh_build_task *task, uint32_t left_cou
  * the references) and returns VKRT_OK; after a cancel frees everything and returns
  * VKRT_ERROR_CANCELLED. The references are freed either way. */
 vkrt_result bvh_build_finish(bvh_build_state *b, bvh *out);
+/* Frees what bvh_build_begin() allocated, for a build that fails between begin and finish. */
+void bvh_build_abort(bvh_build_state *b);
 
 #endif

@@ -1,9 +1,16 @@
+/* madvise() and MADV_HUGEPAGE are not POSIX; glibc shows them with _DEFAULT_SOURCE. */
+#if defined(__linux__)
+#define _DEFAULT_SOURCE
+#endif
 #include "core.h"
 
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
+#if defined(__linux__)
+#include <sys/mman.h>
+#endif
 
 static void *default_alloc(void *user, size_t size)
 {
@@ -48,6 +55,22 @@ void *core_calloc_array(core *c, size_t count, size_t size)
 void core_free(core *c, void *pointer)
 {
     if (pointer) c->allocator.free(c->allocator.user, pointer);
+}
+
+void core_advise_huge_pages(void *pointer, size_t size)
+{
+#if defined(__linux__) && defined(MADV_HUGEPAGE)
+    /* Only whole 4 KiB pages inside the block: the advice is per page, and the pages around
+     * it may belong to other allocations. A refusal (no THP, memory that is not anonymous)
+     * changes nothing, so the result is ignored. */
+    const uintptr_t page = 4096;
+    uintptr_t first = ((uintptr_t)pointer + page - 1) & ~(page - 1);
+    uintptr_t end = ((uintptr_t)pointer + size) & ~(page - 1);
+    if (size >= CORE_HUGE_PAGE_MIN && end > first) (void)madvise((void *)first, end - first, MADV_HUGEPAGE);
+#else
+    (void)pointer;
+    (void)size;
+#endif
 }
 
 int core_grow(core *c, void **array, size_t *capacity, size_t needed, size_t elem_size)

@@ -130,7 +130,7 @@ static const char render_help[] =
     "  --size WxH                1024x1024\n"
     "  --no-normalize            keep world coordinates (default: scene scaled into [-0.5,0.5]^3)\n"
     "  --device N                Vulkan device N as listed by `vkrt devices` (default: the best)\n"
-    "  --threads N               CPU backend threads (default: one per core)\n"
+    "  --threads N               CPU backend and BVH build threads (default: one per core)\n"
     "  --validation              enable the Vulkan validation layer; any message fails the run\n"
     "  --repeat N                render once to warm up (shader compilation), then N times, and\n"
     "                            report the median times\n"

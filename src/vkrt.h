@@ -103,7 +103,9 @@ typedef struct vkrt_context_desc {
                                         > virtual > CPU); true: device_index */
     uint32_t device_index;           /* with select_device: 0-based, in the order of
                                         vkrt_devices_list() */
-    uint32_t cpu_threads;            /* 0 (default): one per online core; CPU backend only */
+    uint32_t cpu_threads;            /* 0 (default): one per online core; the CPU backend's
+                                        tracing threads, and on both backends the threads that
+                                        build a scene's BVH */
     const char *pipeline_cache_path; /* NULL (default): no cache on disk; else read at creation
                                         and written back at destruction (copied) */
 } vkrt_context_desc;
