@@ -74,6 +74,8 @@ static bool alpha_passes(const cpu_trace_scene *s, uint32_t prim, float u, float
 #define REAL_TFAR_WIDEN VKRT_TFAR_WIDEN_FLOAT
 #include "cpu_trace_real.h"
 
+#include "cpu_trace_bvh4.h"
+
 #define REAL double
 #define R(name) name##_d
 #define REAL_IS_FLOAT 0
@@ -103,6 +105,39 @@ static float refine_hit_distance(vec3_d origin, vec3_d dir, double tmin, double 
     return refined > tmin && refined < tmax ? (float)refined : t;
 }
 
+/* A float ray through the binary traversal, or through the 4-wide one where the scene has it
+ * and no one reads the binary traversal's counts (`counted`): the same hit either way. */
+static hit trace_float(const cpu_trace_scene *s, vkrt_traversal traversal, vkrt_intersector isect, const ray_f *r,
+                       heat_counts *heat, bool any_hit, bool counted)
+{
+    if (s->wide && traversal == VKRT_TRAVERSAL_BVH && !counted) return trace_ray_bvh4_f(s, isect, r, any_hit);
+    return trace_ray_f(s, traversal, isect, r, heat, any_hit);
+}
+
+unsigned cpu_trace_box4_test(const vkrt_gpu_ray *ray, const bvh4_node *n, float best_t, bool simd,
+                             float out_tnear[BVH4_WIDTH])
+{
+    ray_f r = ray_setup_f(v_load_f(ray->origin), v_load_f(ray->dir), ray->tmin, INFINITY);
+#if defined(__SSE2__)
+    if (simd) {
+        box4_ray b = box4_ray_setup(&r);
+        return box4_test_sse2(&b, n, best_t, out_tnear);
+    }
+#else
+    (void)simd;
+#endif
+    return box4_test_scalar(&r, n, best_t, out_tnear);
+}
+
+bool cpu_trace_box4_has_simd(void)
+{
+#if defined(__SSE2__)
+    return true;
+#else
+    return false;
+#endif
+}
+
 vkrt_gpu_ray cpu_trace_camera_ray(const vkrt_gpu_push *camera, uint32_t x, uint32_t y)
 {
     camera_f cam = { v_load_f(camera->eye), v_load_f(camera->right), v_load_f(camera->up), v_load_f(camera->forward),
@@ -118,7 +153,7 @@ bool cpu_trace_one(const cpu_trace_scene *s, vkrt_traversal traversal, vkrt_inte
     heat_counts heat = { 0 };
     hit best = { .prim = NO_PRIM };
     /* vkrt_gpu_ray and vkrt_ray share one layout (asserted in api.c). */
-    if (ray_from_buffer_f((const vkrt_ray *)ray, &r)) best = trace_ray_f(s, traversal, isect, &r, &heat, any_hit);
+    if (ray_from_buffer_f((const vkrt_ray *)ray, &r)) best = trace_float(s, traversal, isect, &r, &heat, any_hit, false);
     counts->nodes += heat.nodes;
     counts->leaves += heat.leaves;
     counts->tris += heat.tris;
@@ -236,7 +271,8 @@ static void trace_pixel(const job *j, uint32_t x, uint32_t y, float out[4], trac
             best = trace_ray_d(s, p->traversal, p->intersector, &r, &heat, false);
         } else {
             ray_f r = camera_ray_f(&j->cam_f, x, y);
-            best = trace_ray_f(s, p->traversal, p->intersector, &r, &heat, false);
+            /* The heat map and the render counters show the binary traversal (as the GPU's). */
+            best = trace_float(s, p->traversal, p->intersector, &r, &heat, false, p->counters || p->mode == VKRT_MODE_HEATMAP);
             if (best.prim != NO_PRIM) {
                 ray_d exact = camera_ray_d(&j->cam_d, x, y);
                 best.t = refine_hit_distance(exact.origin, exact.dir, 0.0, INFINITY, &s->tris[best.tri], best.t);
@@ -283,7 +319,7 @@ static vkrt_hit trace_one_ray(const job *j, const vkrt_ray *in)
         if (ray_from_buffer_d(in, &r)) best = trace_ray_d(j->scene, p->traversal, p->intersector, &r, &heat, p->any_hit);
     } else {
         ray_f r;
-        if (ray_from_buffer_f(in, &r)) best = trace_ray_f(j->scene, p->traversal, p->intersector, &r, &heat, p->any_hit);
+        if (ray_from_buffer_f(in, &r)) best = trace_float(j->scene, p->traversal, p->intersector, &r, &heat, p->any_hit, false);
         if (best.prim != NO_PRIM)
             best.t = refine_hit_distance((vec3_d){ r.origin.x, r.origin.y, r.origin.z }, (vec3_d){ r.dir.x, r.dir.y, r.dir.z },
                                          r.tmin, r.tmax, &j->scene->tris[best.tri], best.t);
