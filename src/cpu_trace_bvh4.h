@@ -18,6 +18,7 @@
 
 #if defined(__SSE2__)
 #include <emmintrin.h>
+#include <xmmintrin.h>
 #endif
 
 /* The box test runs once per node visited: a call there costs as much as the test. */
@@ -118,6 +119,19 @@ static unsigned box4_test_scalar(const ray_f *r, const bvh4_node *n, float best_
     return mask;
 }
 
+/* Asks for the first two cache lines of an item about to be visited, so that a node's hit
+ * children are fetched together rather than one after the other. */
+static inline void prefetch_item(const cpu_trace_scene *s, const bvh4_item *item)
+{
+#if defined(__SSE2__)
+    const char *p = item->count ? (const char *)&s->tris[item->first] : (const char *)&s->wide->nodes[item->first];
+    _mm_prefetch(p, _MM_HINT_T0);
+    _mm_prefetch(p + 64, _MM_HINT_T0);
+#else
+    (void)s, (void)item;
+#endif
+}
+
 /* Closest (any_hit: the first found) hit of r in s->wide into *best. */
 static void trace_bvh4_f(const cpu_trace_scene *s, vkrt_intersector isect, const ray_f *r, hit_f *best, bool any_hit)
 {
@@ -147,15 +161,35 @@ static void trace_bvh4_f(const cpu_trace_scene *s, vkrt_intersector isect, const
 #else
             unsigned mask = box4_test_scalar(r, n, best->t, tnear);
 #endif
-            if (mask & (mask - 1)) {
-                /* Two or more: in order of entry distance (insertion sort of at most four), the
-                 * nearest visited next, the others pushed farthest first so the nearer ones
-                 * come off the stack first. */
-                bvh4_item hits[BVH4_WIDTH];
-                uint32_t count = 0;
-                for (unsigned rest = mask; rest; rest &= rest - 1) {
-                    unsigned i = lowest_slot(rest);
+            if (mask) {
+                /* The hit slots in order of entry distance (a stable insertion sort; one and two
+                 * hits, the common cases, take the short ways): the nearest is visited next, the
+                 * others pushed farthest first so the nearer ones come off the stack first. */
+                unsigned i = lowest_slot(mask);
+                bvh4_item nearest = { n->child[i], n->count[i], tnear[i] };
+                if (!(mask &= mask - 1)) {
+                    item = nearest;
+                    continue;
+                }
+                i = lowest_slot(mask);
+                bvh4_item second = { n->child[i], n->count[i], tnear[i] };
+                prefetch_item(s, &nearest);
+                prefetch_item(s, &second);
+                if (second.tnear < nearest.tnear) {
+                    bvh4_item t = nearest;
+                    nearest = second, second = t;
+                }
+                if (!(mask &= mask - 1)) {
+                    if (sp < BVH4_STACK_SIZE) stack[sp++] = second; /* never full: see BVH4_STACK_SIZE */
+                    item = nearest;
+                    continue;
+                }
+                bvh4_item hits[BVH4_WIDTH] = { nearest, second };
+                uint32_t count = 2;
+                for (; mask; mask &= mask - 1) {
+                    i = lowest_slot(mask);
                     bvh4_item h = { n->child[i], n->count[i], tnear[i] };
+                    prefetch_item(s, &h);
                     uint32_t k = count++;
                     while (k > 0 && h.tnear < hits[k - 1].tnear) {
                         hits[k] = hits[k - 1];
@@ -164,13 +198,8 @@ static void trace_bvh4_f(const cpu_trace_scene *s, vkrt_intersector isect, const
                     hits[k] = h;
                 }
                 for (uint32_t k = count - 1; k > 0; k--)
-                    if (sp < BVH4_STACK_SIZE) stack[sp++] = hits[k]; /* never full: see BVH4_STACK_SIZE */
+                    if (sp < BVH4_STACK_SIZE) stack[sp++] = hits[k];
                 item = hits[0];
-                continue;
-            }
-            if (mask) {
-                unsigned i = lowest_slot(mask);
-                item = (bvh4_item){ n->child[i], n->count[i], tnear[i] };
                 continue;
             }
         }
