@@ -9,6 +9,7 @@
 #include <pthread.h>
 #include <stdatomic.h>
 #include <stdbool.h>
+#include <string.h>
 
 #include "cpu_integrate.h"
 #include "scene_pack.h"
@@ -75,6 +76,7 @@ static bool alpha_passes(const cpu_trace_scene *s, uint32_t prim, float u, float
 #include "cpu_trace_real.h"
 
 #include "cpu_trace_bvh4.h"
+#include "cpu_trace_packet4.h"
 
 #define REAL double
 #define R(name) name##_d
@@ -309,6 +311,15 @@ static bool run_tile(job *j, size_t t)
     return true;
 }
 
+/* A float hit as vkrt_trace_rays returns it: the distance refined in double along r. */
+static vkrt_hit public_hit_f(const cpu_trace_scene *s, const ray_f *r, hit best)
+{
+    if (best.prim == NO_PRIM) return (vkrt_hit){ .t = -1.0f, .prim_id = VKRT_NO_HIT };
+    best.t = refine_hit_distance((vec3_d){ r->origin.x, r->origin.y, r->origin.z }, (vec3_d){ r->dir.x, r->dir.y, r->dir.z },
+                                 r->tmin, r->tmax, &s->tris[best.tri], best.t);
+    return (vkrt_hit){ .t = best.t, .prim_id = best.prim, .u = best.u, .v = best.v };
+}
+
 static vkrt_hit trace_one_ray(const job *j, const vkrt_ray *in)
 {
     const cpu_trace_rays_params *p = j->rays_params;
@@ -317,24 +328,52 @@ static vkrt_hit trace_one_ray(const job *j, const vkrt_ray *in)
     if (p->precision == VKRT_PRECISION_DOUBLE) {
         ray_d r;
         if (ray_from_buffer_d(in, &r)) best = trace_ray_d(j->scene, p->traversal, p->intersector, &r, &heat, p->any_hit);
-    } else {
-        ray_f r;
-        if (ray_from_buffer_f(in, &r)) best = trace_float(j->scene, p->traversal, p->intersector, &r, &heat, p->any_hit, false);
-        if (best.prim != NO_PRIM)
-            best.t = refine_hit_distance((vec3_d){ r.origin.x, r.origin.y, r.origin.z }, (vec3_d){ r.dir.x, r.dir.y, r.dir.z },
-                                         r.tmin, r.tmax, &j->scene->tris[best.tri], best.t);
+        if (best.prim == NO_PRIM) return (vkrt_hit){ .t = -1.0f, .prim_id = VKRT_NO_HIT };
+        return (vkrt_hit){ .t = best.t, .prim_id = best.prim, .u = best.u, .v = best.v };
     }
-    if (best.prim == NO_PRIM) return (vkrt_hit){ .t = -1.0f, .prim_id = VKRT_NO_HIT };
-    return (vkrt_hit){ .t = best.t, .prim_id = best.prim, .u = best.u, .v = best.v };
+    ray_f r;
+    if (!ray_from_buffer_f(in, &r)) return (vkrt_hit){ .t = -1.0f, .prim_id = VKRT_NO_HIT };
+    return public_hit_f(j->scene, &r, trace_float(j->scene, p->traversal, p->intersector, &r, &heat, p->any_hit, false));
 }
+
+#if defined(__SSE2__)
+/* Rays [i, i + 4) as one packet where they are valid and coherent (cpu_trace_packet4.h);
+ * false, with nothing written, where they are not. */
+static bool trace_packet(const job *j, size_t i)
+{
+    const cpu_trace_rays_params *p = j->rays_params;
+    if (!packet4_coherent(&j->rays[i])) return false;
+    packet4 packet;
+    for (int l = 0; l < PACKET4_LANES; l++)
+        if (!ray_from_buffer_f(&j->rays[i + l], &packet.ray[l])) return false;
+    packet4_setup(&packet);
+    trace_packet4_f(j->scene, p->intersector, p->any_hit, &packet);
+    for (int l = 0; l < PACKET4_LANES; l++) {
+        const hit_f *b = &packet.best[l];
+        j->hits[i + l] = public_hit_f(j->scene, &packet.ray[l], (hit){ b->t, b->u, b->v, b->tri, b->prim });
+    }
+    return true;
+}
+#endif
 
 static bool run_ray_block(job *j, size_t block)
 {
     size_t first = block * RAY_BLOCK, end = first + RAY_BLOCK < j->ray_count ? first + RAY_BLOCK : j->ray_count;
-    for (size_t i = first; i < end; i++) {
+#if defined(__SSE2__)
+    const cpu_trace_rays_params *p = j->rays_params;
+    const bool packets = j->scene->wide && p->traversal == VKRT_TRAVERSAL_BVH && p->precision != VKRT_PRECISION_DOUBLE;
+#endif
+    for (size_t i = first; i < end;) {
         /* Checked every 64 rays so a cancel stops a slow (naive) block early. */
         if ((i & 63) == 0 && atomic_load_explicit(&j->cancel, memory_order_relaxed)) return false;
+#if defined(__SSE2__)
+        if (packets && i + PACKET4_LANES <= end && trace_packet(j, i)) {
+            i += PACKET4_LANES;
+            continue;
+        }
+#endif
         j->hits[i] = trace_one_ray(j, &j->rays[i]);
+        i++;
     }
     return true;
 }
