@@ -197,7 +197,9 @@ static bool packet4_coherent(const vkrt_ray rays[PACKET4_LANES])
     float aa = a[0] * a[0] + a[1] * a[1] + a[2] * a[2];
     for (int l = 1; l < PACKET4_LANES; l++) {
         const float *b = rays[l].dir;
-        if (memcmp(rays[0].origin, rays[l].origin, sizeof rays[0].origin) != 0) return false;
+        if (rays[0].origin[0] != rays[l].origin[0] || rays[0].origin[1] != rays[l].origin[1] ||
+            rays[0].origin[2] != rays[l].origin[2])
+            return false;
         float ab = a[0] * b[0] + a[1] * b[1] + a[2] * b[2], bb = b[0] * b[0] + b[1] * b[1] + b[2] * b[2];
         if (!(ab > 0.0f && ab * ab >= PACKET4_MIN_COSINE * PACKET4_MIN_COSINE * aa * bb)) return false;
     }
