@@ -130,6 +130,21 @@ unsigned cpu_trace_box4_test(const vkrt_gpu_ray *ray, const bvh4_node *n, float 
     return box4_test_scalar(&r, n, best_t, out_tnear);
 }
 
+unsigned cpu_trace_watertight4_test(const vkrt_gpu_ray *ray, const vkrt_gpu_tri *const tris[4], bool simd,
+                                    float out_t[4], float out_u[4], float out_v[4])
+{
+    ray_f r = ray_setup_f(v_load_f(ray->origin), v_load_f(ray->dir), ray->tmin, ray->tmax);
+#if defined(__SSE2__)
+    if (simd) return watertight4_sse2(&r, tris, out_t, out_u, out_v);
+#else
+    (void)simd;
+#endif
+    unsigned mask = 0;
+    for (unsigned l = 0; l < 4; l++)
+        if (intersect_triangle_watertight_f(&r, tris[l], &out_t[l], &out_u[l], &out_v[l])) mask |= 1u << l;
+    return mask;
+}
+
 bool cpu_trace_box4_has_simd(void)
 {
 #if defined(__SSE2__)

@@ -85,7 +85,14 @@ bool cpu_trace_one(const cpu_trace_scene *s, vkrt_traversal traversal, vkrt_inte
  * used slot's entry distance to out_tnear[i]. */
 unsigned cpu_trace_box4_test(const vkrt_gpu_ray *ray, const bvh4_node *n, float best_t, bool simd,
                              float out_tnear[BVH4_WIDTH]);
-/* Whether cpu_trace_box4_test(..., true, ...) runs SSE2 code (else it is the portable test). */
+/* The watertight test of the 4-wide traversal's leaves on four triangles, for the tests that
+ * hold it to the scalar one: the float ray made from ray (tmin, tmax as given; no checks).
+ * simd: the SSE2 test of four at once; false: intersect_triangle_watertight_f per triangle.
+ * Returns the mask of hit triangles and writes each hit's t, u, v. */
+unsigned cpu_trace_watertight4_test(const vkrt_gpu_ray *ray, const vkrt_gpu_tri *const tris[4], bool simd,
+                                    float out_t[4], float out_u[4], float out_v[4]);
+/* Whether cpu_trace_box4_test and cpu_trace_watertight4_test run SSE2 code with simd (else
+ * they are the portable tests). */
 bool cpu_trace_box4_has_simd(void);
 
 #endif

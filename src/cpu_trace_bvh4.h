@@ -119,6 +119,103 @@ static unsigned box4_test_scalar(const ray_f *r, const bvh4_node *n, float best_
     return mask;
 }
 
+#if defined(__SSE2__)
+/* intersect_triangle_watertight_f on four triangles at once, lane l the triangle tris[l]:
+ * the same operations in the same order on each lane (the per-ray permutation picks whole
+ * vectors, the double re-evaluation of zero edge values runs per lane), so each lane's t, u, v
+ * and answer are the scalar test's bits. Bit l of the result: lane l hit. */
+static unsigned watertight4_sse2(const ray_f *r, const vkrt_gpu_tri *const tris[4], float t_out[4], float u_out[4],
+                                 float v_out[4])
+{
+    __m128 v0[4], v1[4], v2[4];
+    for (int l = 0; l < 4; l++) {
+        v0[l] = _mm_loadu_ps(&tris[l]->v0.x);
+        v1[l] = _mm_loadu_ps(&tris[l]->v1.x);
+        v2[l] = _mm_loadu_ps(&tris[l]->v2.x);
+    }
+    _MM_TRANSPOSE4_PS(v0[0], v0[1], v0[2], v0[3]);
+    _MM_TRANSPOSE4_PS(v1[0], v1[1], v1[2], v1[3]);
+    _MM_TRANSPOSE4_PS(v2[0], v2[1], v2[2], v2[3]);
+    const __m128 o[3] = { _mm_set1_ps(r->origin.x), _mm_set1_ps(r->origin.y), _mm_set1_ps(r->origin.z) };
+    __m128 a[3], b[3], c[3];
+    for (int k = 0; k < 3; k++) {
+        a[k] = _mm_sub_ps(v0[k], o[k]);
+        b[k] = _mm_sub_ps(v1[k], o[k]);
+        c[k] = _mm_sub_ps(v2[k], o[k]);
+    }
+    const __m128 sx = _mm_set1_ps(r->sx), sy = _mm_set1_ps(r->sy), sz = _mm_set1_ps(r->sz);
+    const __m128 a_z = a[r->kz], b_z = b[r->kz], c_z = c[r->kz];
+    const __m128 ax = _mm_sub_ps(a[r->kx], _mm_mul_ps(sx, a_z)), ay = _mm_sub_ps(a[r->ky], _mm_mul_ps(sy, a_z));
+    const __m128 bx = _mm_sub_ps(b[r->kx], _mm_mul_ps(sx, b_z)), by = _mm_sub_ps(b[r->ky], _mm_mul_ps(sy, b_z));
+    const __m128 cx = _mm_sub_ps(c[r->kx], _mm_mul_ps(sx, c_z)), cy = _mm_sub_ps(c[r->ky], _mm_mul_ps(sy, c_z));
+    __m128 eu = _mm_sub_ps(_mm_mul_ps(cx, by), _mm_mul_ps(cy, bx));
+    __m128 ev = _mm_sub_ps(_mm_mul_ps(ax, cy), _mm_mul_ps(ay, cx));
+    __m128 ew = _mm_sub_ps(_mm_mul_ps(bx, ay), _mm_mul_ps(by, ax));
+    const __m128 zero = _mm_setzero_ps();
+    unsigned zeros = (unsigned)_mm_movemask_ps(
+        _mm_or_ps(_mm_or_ps(_mm_cmpeq_ps(eu, zero), _mm_cmpeq_ps(ev, zero)), _mm_cmpeq_ps(ew, zero)));
+    if (zeros) {
+        float e[3][4], p[6][4];
+        _mm_storeu_ps(e[0], eu), _mm_storeu_ps(e[1], ev), _mm_storeu_ps(e[2], ew);
+        _mm_storeu_ps(p[0], ax), _mm_storeu_ps(p[1], ay), _mm_storeu_ps(p[2], bx);
+        _mm_storeu_ps(p[3], by), _mm_storeu_ps(p[4], cx), _mm_storeu_ps(p[5], cy);
+        for (; zeros; zeros &= zeros - 1) {
+            unsigned l = lowest_slot(zeros);
+            double dax = p[0][l], day = p[1][l], dbx = p[2][l], dby = p[3][l], dcx = p[4][l], dcy = p[5][l];
+            e[0][l] = (float)(dcx * dby - dcy * dbx);
+            e[1][l] = (float)(dax * dcy - day * dcx);
+            e[2][l] = (float)(dbx * day - dby * dax);
+        }
+        eu = _mm_loadu_ps(e[0]), ev = _mm_loadu_ps(e[1]), ew = _mm_loadu_ps(e[2]);
+    }
+    __m128 negative = _mm_or_ps(_mm_or_ps(_mm_cmplt_ps(eu, zero), _mm_cmplt_ps(ev, zero)), _mm_cmplt_ps(ew, zero));
+    __m128 positive = _mm_or_ps(_mm_or_ps(_mm_cmpgt_ps(eu, zero), _mm_cmpgt_ps(ev, zero)), _mm_cmpgt_ps(ew, zero));
+    __m128 det = _mm_add_ps(_mm_add_ps(eu, ev), ew);
+    __m128 reject = _mm_or_ps(_mm_and_ps(negative, positive), _mm_cmpeq_ps(det, zero));
+    __m128 t_scaled = _mm_add_ps(_mm_add_ps(_mm_mul_ps(eu, _mm_mul_ps(sz, a_z)), _mm_mul_ps(ev, _mm_mul_ps(sz, b_z))),
+                                 _mm_mul_ps(ew, _mm_mul_ps(sz, c_z)));
+    __m128 inv_det = _mm_div_ps(_mm_set1_ps(1.0f), det);
+    __m128 t = _mm_mul_ps(t_scaled, inv_det);
+    __m128 inside = _mm_and_ps(_mm_cmpgt_ps(t, _mm_set1_ps(r->tmin)), _mm_cmplt_ps(t, _mm_set1_ps(r->tmax)));
+    _mm_storeu_ps(t_out, t);
+    _mm_storeu_ps(u_out, _mm_mul_ps(ev, inv_det));
+    _mm_storeu_ps(v_out, _mm_mul_ps(ew, inv_det));
+    return (unsigned)_mm_movemask_ps(_mm_andnot_ps(reject, inside));
+}
+#endif
+
+/* test_triangle_f on the count triangles from first, in order; true when any_hit and one hit. */
+static inline bool test_leaf_f(vkrt_intersector isect, const ray_f *r, const cpu_trace_scene *s, uint32_t first,
+                               uint32_t count, hit_f *best, bool any_hit)
+{
+#if defined(__SSE2__)
+    if (isect != VKRT_INTERSECTOR_MOLLER_TRUMBORE && count > 1) {
+        for (uint32_t at = first, end = first + count; at < end; at += 4) {
+            const uint32_t n = end - at < 4 ? end - at : 4;
+            /* Lanes past the leaf repeat its last triangle, and are ignored. */
+            const vkrt_gpu_tri *const tris[4] = { &s->tris[at], &s->tris[at + (n > 1)], &s->tris[at + (n > 2 ? 2 : n - 1)],
+                                                  &s->tris[at + n - 1] };
+            float t[4], u[4], v[4];
+            unsigned hits = watertight4_sse2(r, tris, t, u, v) & ((1u << n) - 1u);
+            for (; hits; hits &= hits - 1) {
+                unsigned l = lowest_slot(hits);
+                uint32_t prim = tris[l]->prim_id;
+                if (hit_closer_f(t[l], prim, best->t, best->prim) && (!s->alpha_tested || alpha_passes(s, prim, u[l], v[l]))) {
+                    *best = (hit_f){ .t = t[l], .u = u[l], .v = v[l], .tri = at + l, .prim = prim };
+                    if (any_hit) return true;
+                }
+            }
+        }
+        return false;
+    }
+#endif
+    for (uint32_t i = first; i < first + count; i++) {
+        test_triangle_f(isect, r, s, i, best);
+        if (any_hit && best->prim != NO_PRIM) return true;
+    }
+    return false;
+}
+
 /* Asks for the first two cache lines of an item about to be visited, so that a node's hit
  * children are fetched together rather than one after the other. */
 static inline void prefetch_item(const cpu_trace_scene *s, const bvh4_item *item)
@@ -149,10 +246,7 @@ static void trace_bvh4_f(const cpu_trace_scene *s, vkrt_intersector isect, const
     bvh4_item item = { 0, 0, root_tnear };
     for (;;) {
         if (item.count != 0) {
-            for (uint32_t i = item.first; i < item.first + item.count; i++) {
-                test_triangle_f(isect, r, s, i, best);
-                if (any_hit && best->prim != NO_PRIM) return;
-            }
+            if (test_leaf_f(isect, r, s, item.first, item.count, best, any_hit)) return;
         } else {
             const bvh4_node *n = &w->nodes[item.first];
             float tnear[BVH4_WIDTH];

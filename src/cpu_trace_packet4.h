@@ -7,7 +7,7 @@
  * Same answers as the single-ray traversals: in lane l the box arithmetic is intersect_box_f's
  * for ray l, operation for operation (slab() included, its +-0 direction branch as a per-lane
  * select), against ray l's own closest hit so far; a leaf's triangles are tested for the lanes
- * that entered it with test_triangle_f on ray l, and the closest hit is chosen by hit_closer,
+ * that entered it with test_leaf_f on ray l, and the closest hit is chosen by hit_closer,
  * which the order of the visits does not change. A lane that entered no box of a subtree
  * tests nothing in it; an any-hit lane stops at its first hit while the others go on.
  *
@@ -130,14 +130,7 @@ static void trace_packet4_f(const cpu_trace_scene *s, vkrt_intersector isect, bo
         if (item.count != 0) {
             for (unsigned lanes = item.mask; lanes; lanes &= lanes - 1) {
                 unsigned l = lowest_slot(lanes);
-                hit_f *best = &p->best[l];
-                for (uint32_t i = item.first; i < item.first + item.count; i++) {
-                    test_triangle_f(isect, &p->ray[l], s, i, best);
-                    if (any_hit && best->prim != NO_PRIM) {
-                        done |= 1u << l;
-                        break;
-                    }
-                }
+                if (test_leaf_f(isect, &p->ray[l], s, item.first, item.count, &p->best[l], any_hit)) done |= 1u << l;
             }
             p->best_t = _mm_setr_ps(p->best[0].t, p->best[1].t, p->best[2].t, p->best[3].t);
             if (done == active) return;

@@ -1043,6 +1043,70 @@ static void bvh4_box_test_simd_equals_binary_box_test_on_hostile_inputs(void)
     CHECK(hits > tests / 10);
 }
 
+/* The SIMD four-triangle watertight test equals intersect_triangle_watertight_f, answer and
+ * t, u, v bit for bit, where its special cases live: corners on a small integer grid and rays
+ * from grid points along grid directions and at corners and edge midpoints (edge values of
+ * exactly 0, the double re-evaluation), degenerate triangles (det = 0), rays in a triangle's
+ * plane, +-0 direction components and hits at tmin and tmax. */
+static void watertight4_equals_scalar_watertight_on_hostile_triangles(void)
+{
+    if (!cpu_trace_box4_has_simd()) {
+        fprintf(stderr, "  no SIMD triangle test in this build\n");
+        return;
+    }
+    test_rng rng = { 4077 };
+    vkrt_gpu_tri tri[4];
+    size_t tests = 0, hits = 0, differ = 0;
+    for (int iter = 0; iter < 100000; iter++) {
+        for (int l = 0; l < 4; l++) {
+            float p[9];
+            for (int k = 0; k < 9; k++) p[k] = (float)(int)(5.0 * rng_uniform(&rng)) - 2.0f;
+            double kind = rng_uniform(&rng);
+            if (kind < 0.1) memcpy(p + 6, p + 3, 3 * sizeof *p); /* two corners equal */
+            else if (kind < 0.2)
+                for (int k = 0; k < 3; k++) p[6 + k] = 2.0f * p[3 + k] - p[k]; /* collinear */
+            else if (kind < 0.3)
+                for (int k = 0; k < 9; k++) p[k] += (float)(rng_uniform(&rng) - 0.5); /* off the grid */
+            tri[l] = (vkrt_gpu_tri){ .v0 = { p[0], p[1], p[2] }, .prim_id = (uint32_t)l, .v1 = { p[3], p[4], p[5] },
+                                     .v2 = { p[6], p[7], p[8] } };
+        }
+        const vkrt_gpu_tri *const tris[4] = { &tri[0], &tri[1], &tri[2], &tri[3] };
+        vkrt_gpu_ray ray = { .tmin = 0.0f, .tmax = INFINITY };
+        float o[3], target[3];
+        for (int k = 0; k < 3; k++) o[k] = (float)(int)(7.0 * rng_uniform(&rng)) - 3.0f;
+        const vkrt_gpu_tri *aim = &tri[(int)(4.0 * rng_uniform(&rng))];
+        const float corner[3][3] = { { aim->v0.x, aim->v0.y, aim->v0.z }, { aim->v1.x, aim->v1.y, aim->v1.z },
+                                     { aim->v2.x, aim->v2.y, aim->v2.z } };
+        double how = rng_uniform(&rng);
+        for (int k = 0; k < 3; k++) {
+            if (how < 0.3) target[k] = corner[0][k];                                   /* a corner */
+            else if (how < 0.6) target[k] = 0.5f * (corner[0][k] + corner[1][k]);     /* an edge midpoint */
+            else if (how < 0.8) target[k] = (corner[0][k] + corner[1][k] + corner[2][k]) / 3.0f;
+            else target[k] = o[k] + (float)(int)(3.0 * rng_uniform(&rng)) - 1.0f;      /* a grid direction */
+        }
+        ray.origin = (vkrt_float3){ o[0], o[1], o[2] };
+        ray.dir = (vkrt_float3){ target[0] - o[0], target[1] - o[1], target[2] - o[2] };
+        if (ray.dir.x == 0 && ray.dir.y == 0 && ray.dir.z == 0) ray.dir.z = -0.0f, ray.dir.x = 1.0f;
+        if (iter % 7 == 0) ray.tmin = 1.0f; /* the target at t = 1 sits on the boundary */
+        if (iter % 11 == 0) ray.tmax = 1.0f;
+        float t[2][4], u[2][4], v[2][4];
+        unsigned m_simd = cpu_trace_watertight4_test(&ray, tris, true, t[0], u[0], v[0]);
+        unsigned m_scalar = cpu_trace_watertight4_test(&ray, tris, false, t[1], u[1], v[1]);
+        bool same = m_simd == m_scalar;
+        for (int l = 0; l < 4; l++)
+            if (m_scalar & (1u << l)) same = same && same_float(t[0][l], t[1][l]) && same_float(u[0][l], u[1][l]) &&
+                                              same_float(v[0][l], v[1][l]);
+        if (!same && differ++ < 3)
+            fprintf(stderr, "  differ: o (%g %g %g) d (%g %g %g): masks %x %x\n", o[0], o[1], o[2], ray.dir.x, ray.dir.y,
+                    ray.dir.z, m_simd, m_scalar);
+        tests += 4;
+        for (int l = 0; l < 4; l++) hits += (m_scalar >> l) & 1u;
+    }
+    fprintf(stderr, "  %zu triangle tests, %zu hit, %zu groups of four differ\n", tests, hits, differ);
+    CHECK_EQ_U64(differ, 0);
+    CHECK(hits > tests / 20);
+}
+
 /* Rays for the identity test, in a new array: the camera rays of three views (one from inside
  * the model's box), rays from random points of the box in random directions, and from each
  * camera hit four cosine-distributed rays about the facing geometric normal from
@@ -1201,6 +1265,7 @@ int main(void)
     RUN(cpu_double_watertight_never_misses_shared_edges_and_vertices);
     RUN(cpu_trace_rays_bvh_naive_and_precisions_agree);
     RUN(bvh4_box_test_simd_equals_binary_box_test_on_hostile_inputs);
+    RUN(watertight4_equals_scalar_watertight_on_hostile_triangles);
     RUN(bvh4_and_binary_traversal_give_identical_hits);
     RUN(double_reference_and_float_agree_on_camera_renders);
     RUN(eye_inside_a_closed_mesh_always_hits);
