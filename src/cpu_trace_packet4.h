@@ -37,33 +37,28 @@ typedef struct packet4_item {
     unsigned mask;
 } packet4_item;
 
-/* Fills p's lane constants from p->ray (each as ray_from_buffer_f made it). */
+/* Fills p's lane constants from p->ray (each as ray_from_buffer_f made it). The vectors are
+ * put together in registers: four scalar stores read back as one vector would each miss the
+ * store forwarding. */
 static void packet4_setup(packet4 *p)
 {
-    float o[3][PACKET4_LANES], inv[3][PACKET4_LANES], tmin[PACKET4_LANES], best[PACKET4_LANES];
-    uint32_t par[3][PACKET4_LANES];
+    const ray_f *r = p->ray;
     p->any_parallel = false;
     for (int l = 0; l < PACKET4_LANES; l++) {
-        const ray_f *r = &p->ray[l];
-        p->best[l] = (hit_f){ .t = r->tmax, .tri = NO_PRIM, .prim = NO_PRIM };
-        const float ro[3] = { r->origin.x, r->origin.y, r->origin.z }, ri[3] = { r->inv_dir.x, r->inv_dir.y, r->inv_dir.z };
-        for (int a = 0; a < 3; a++) {
-            o[a][l] = ro[a];
-            inv[a][l] = ri[a];
-            bool parallel = f_abs_f(ri[a]) == INFINITY;
-            par[a][l] = parallel ? 0xFFFFFFFFu : 0u;
-            p->any_parallel |= parallel;
-        }
-        tmin[l] = r->tmin;
-        best[l] = r->tmax;
+        p->best[l] = (hit_f){ .t = r[l].tmax, .tri = NO_PRIM, .prim = NO_PRIM };
+        p->any_parallel |= f_abs_f(r[l].inv_dir.x) == INFINITY || f_abs_f(r[l].inv_dir.y) == INFINITY ||
+                           f_abs_f(r[l].inv_dir.z) == INFINITY;
     }
-    for (int a = 0; a < 3; a++) {
-        p->origin[a] = _mm_loadu_ps(o[a]);
-        p->inv_dir[a] = _mm_loadu_ps(inv[a]);
-        p->parallel[a] = _mm_castsi128_ps(_mm_loadu_si128((const __m128i *)par[a]));
-    }
-    p->tmin = _mm_loadu_ps(tmin);
-    p->best_t = _mm_loadu_ps(best);
+    p->origin[0] = _mm_setr_ps(r[0].origin.x, r[1].origin.x, r[2].origin.x, r[3].origin.x);
+    p->origin[1] = _mm_setr_ps(r[0].origin.y, r[1].origin.y, r[2].origin.y, r[3].origin.y);
+    p->origin[2] = _mm_setr_ps(r[0].origin.z, r[1].origin.z, r[2].origin.z, r[3].origin.z);
+    p->inv_dir[0] = _mm_setr_ps(r[0].inv_dir.x, r[1].inv_dir.x, r[2].inv_dir.x, r[3].inv_dir.x);
+    p->inv_dir[1] = _mm_setr_ps(r[0].inv_dir.y, r[1].inv_dir.y, r[2].inv_dir.y, r[3].inv_dir.y);
+    p->inv_dir[2] = _mm_setr_ps(r[0].inv_dir.z, r[1].inv_dir.z, r[2].inv_dir.z, r[3].inv_dir.z);
+    const __m128 inf = _mm_set1_ps(INFINITY), sign = _mm_set1_ps(-0.0f);
+    for (int a = 0; a < 3; a++) p->parallel[a] = _mm_cmpeq_ps(_mm_andnot_ps(sign, p->inv_dir[a]), inf);
+    p->tmin = _mm_setr_ps(r[0].tmin, r[1].tmin, r[2].tmin, r[3].tmin);
+    p->best_t = _mm_setr_ps(r[0].tmax, r[1].tmax, r[2].tmax, r[3].tmax);
 }
 
 /* slab_f for the four lanes on one box plane pair (lo, hi broadcast). */
