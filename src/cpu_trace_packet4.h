@@ -131,6 +131,7 @@ static void trace_packet4_f(const cpu_trace_scene *s, vkrt_intersector isect, bo
             if (done == active) return;
         } else {
             const bvh4_node *n = &w->nodes[item.first];
+            prefetch_children(s, n);
             const __m128 lanes = packet4_lanes(item.mask);
             packet4_item hits[BVH4_WIDTH];
             float key[BVH4_WIDTH];
