@@ -150,7 +150,8 @@ static void fill_stats(vkrt_scene *s, const mesh *m, double load_ms)
     st->sah_cost = bs.sah_cost;
     st->load_ms = load_ms;
     st->build_ms = s->bvh.build_ms;
-    st->node_bytes = (uint64_t)s->bvh.node_count * sizeof(vkrt_gpu_node) + (uint64_t)s->wide.node_count * sizeof(bvh4_node);
+    st->node_bytes = (uint64_t)s->bvh.node_count * sizeof(vkrt_gpu_node) +
+                     (uint64_t)s->wide.node_count * sizeof(bvh4_node);
     st->triangle_bytes = (uint64_t)s->bvh.tri_count * sizeof(vkrt_gpu_tri);
     memcpy(st->bounds_min, m->bounds_min, sizeof st->bounds_min);
     memcpy(st->bounds_max, m->bounds_max, sizeof st->bounds_max);

@@ -145,7 +145,7 @@ unsigned cpu_trace_watertight4_test(const vkrt_gpu_ray *ray, const vkrt_gpu_tri 
     return mask;
 }
 
-bool cpu_trace_box4_has_simd(void)
+bool cpu_trace_simd4_available(void)
 {
 #if defined(__SSE2__)
     return true;
@@ -416,9 +416,12 @@ static bool run_ray_block(job *j, size_t block)
     const cpu_trace_rays_params *p = j->rays_params;
     const bool packets = j->scene->wide && p->traversal == VKRT_TRAVERSAL_BVH && p->precision != VKRT_PRECISION_DOUBLE;
 #endif
-    for (size_t i = first; i < end;) {
+    for (size_t i = first, check = first; i < end;) {
         /* Checked every 64 rays so a cancel stops a slow (naive) block early. */
-        if ((i & 63) == 0 && atomic_load_explicit(&j->cancel, memory_order_relaxed)) return false;
+        if (i >= check) {
+            if (atomic_load_explicit(&j->cancel, memory_order_relaxed)) return false;
+            check = i + 64;
+        }
 #if defined(__SSE2__)
         if (packets && i + PACKET4_LANES <= end && trace_packet(j, i)) {
             i += PACKET4_LANES;

@@ -93,6 +93,6 @@ unsigned cpu_trace_watertight4_test(const vkrt_gpu_ray *ray, const vkrt_gpu_tri 
                                     float out_t[4], float out_u[4], float out_v[4]);
 /* Whether cpu_trace_box4_test and cpu_trace_watertight4_test run SSE2 code with simd (else
  * they are the portable tests). */
-bool cpu_trace_box4_has_simd(void);
+bool cpu_trace_simd4_available(void);
 
 #endif

@@ -985,7 +985,7 @@ static bool same_float(float a, float b) { return memcmp(&a, &b, sizeof a) == 0 
  * unused slots, and best_t of 0, -0, +inf and NaN. */
 static void bvh4_box_test_simd_equals_binary_box_test_on_hostile_inputs(void)
 {
-    if (!cpu_trace_box4_has_simd()) {
+    if (!cpu_trace_simd4_available()) {
         fprintf(stderr, "  no SIMD box test in this build: the portable one is intersect_box_f itself\n");
         return;
     }
@@ -1050,7 +1050,7 @@ static void bvh4_box_test_simd_equals_binary_box_test_on_hostile_inputs(void)
  * plane, +-0 direction components and hits at tmin and tmax. */
 static void watertight4_equals_scalar_watertight_on_hostile_triangles(void)
 {
-    if (!cpu_trace_box4_has_simd()) {
+    if (!cpu_trace_simd4_available()) {
         fprintf(stderr, "  no SIMD triangle test in this build\n");
         return;
     }
