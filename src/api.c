@@ -126,6 +126,7 @@ void vkrt_scene_destroy(vkrt_scene *scene)
     core *c = &scene->ctx->core;
     if (scene->ctx->vk) gpu_scene_destroy(scene->ctx->vk, &scene->gpu);
     bvh_destroy(c, &scene->bvh);
+    bvh4_destroy(c, &scene->wide);
     core_free(c, scene->tris);
     core_free(c, scene->surfaces);
     core_free(c, scene->materials);
@@ -149,7 +150,8 @@ static void fill_stats(vkrt_scene *s, const mesh *m, double load_ms)
     st->sah_cost = bs.sah_cost;
     st->load_ms = load_ms;
     st->build_ms = s->bvh.build_ms;
-    st->node_bytes = (uint64_t)s->bvh.node_count * sizeof(vkrt_gpu_node);
+    st->node_bytes = (uint64_t)s->bvh.node_count * sizeof(vkrt_gpu_node) +
+                     (uint64_t)s->wide.node_count * sizeof(bvh4_node);
     st->triangle_bytes = (uint64_t)s->bvh.tri_count * sizeof(vkrt_gpu_tri);
     memcpy(st->bounds_min, m->bounds_min, sizeof st->bounds_min);
     memcpy(st->bounds_max, m->bounds_max, sizeof st->bounds_max);
@@ -263,6 +265,12 @@ vkrt_result vkrt_scene_create(vkrt_context *ctx, const vkrt_scene_desc *desc, vk
         .progress_user = d.progress_user,
     };
     if ((r = bvh_build(c, &m, &bd, &s->bvh)) != VKRT_OK) goto fail;
+    if (!ctx->vk) {
+        /* The CPU backend's fast path; its time is part of the build's. */
+        double collapse_t0 = core_now_ms();
+        if ((r = bvh4_collapse(c, &s->bvh, &s->wide)) != VKRT_OK) goto fail;
+        s->bvh.build_ms += core_now_ms() - collapse_t0;
+    }
     s->tris = core_alloc_array(c, m.tri_count, sizeof *s->tris);
     if (!s->tris) {
         r = core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "out of memory packing %u triangles", m.tri_count);
@@ -365,6 +373,7 @@ static cpu_trace_scene cpu_scene_of(const vkrt_scene *scene)
         .nodes = scene->bvh.nodes, .node_count = scene->bvh.node_count, .tris = scene->tris,
         .tri_count = scene->bvh.tri_count, .surfaces = scene->surfaces, .materials = scene->materials,
         .textures = scene->textures, .texels = scene->texels, .alpha_tested = scene->alpha_tested,
+        .wide = scene->wide.nodes ? &scene->wide : NULL,
     };
 }
 

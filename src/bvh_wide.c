@@ -1,91 +1,131 @@
-/* Collapse of the binary BVH into a 4-wide one: a wide node starts from a binary interior
- * node's two children and opens the largest-area interior child until it has four (the
- * surface-area order keeps the boxes a ray is likeliest to enter in the upper levels). */
+/* The binary BVH collapsed to four children per node: Wald, Benthin, Boulos, "Getting Rid of
+ * Packets: Efficient SIMD Single-Ray Traversal using Multi-branching BVHs", RT 2008, and
+ * Dammertz, Hanika, Keller, "Shallow Bounding Volume Hierarchies for Fast SIMD Ray Tracing of
+ * Incoherent Rays", EGSR 2008. Each wide node takes a binary node's two children and keeps
+ * opening the one of largest surface area (as Embree's wide builders choose the child to
+ * split), which removes the interior nodes rays are most likely to enter. */
 #include "bvh_wide.h"
 
+#include <assert.h>
+#include <math.h>
+#include <stdint.h>
 #include <string.h>
 
-static float node_area(const vkrt_gpu_node *n)
+#define NODE_ALIGN 64
+
+static double node_area(const vkrt_gpu_node *n)
 {
-    float dx = n->bmax.x - n->bmin.x, dy = n->bmax.y - n->bmin.y, dz = n->bmax.z - n->bmin.z;
-    return dx * dy + dy * dz + dz * dx;
+    double dx = (double)n->bmax.x - n->bmin.x, dy = (double)n->bmax.y - n->bmin.y,
+           dz = (double)n->bmax.z - n->bmin.z;
+    return 2.0 * (dx * dy + dy * dz + dz * dx);
 }
 
-static void set_slot(bvh4_node *w, uint32_t slot, const vkrt_gpu_node *n)
+/* The binary nodes that become the slots of one wide node: start with `node`'s children and
+ * open the interior one of largest area (the first such in slot order on a tie, so the
+ * result is deterministic) while a slot is free. Returns the slot count, 2 to 4. */
+static uint32_t gather_slots(const bvh *b, uint32_t node, uint32_t slots[BVH4_WIDTH])
 {
-    const float lo[3] = { n->bmin.x, n->bmin.y, n->bmin.z }, hi[3] = { n->bmax.x, n->bmax.y, n->bmax.z };
-    for (int a = 0; a < 3; a++) {
-        w->lo[a][slot] = lo[a];
-        w->hi[a][slot] = hi[a];
+    uint32_t n = 2;
+    slots[0] = b->nodes[node].left_first;
+    slots[1] = slots[0] + 1;
+    while (n < BVH4_WIDTH) {
+        uint32_t open = BVH4_EMPTY;
+        double largest = -1.0;
+        for (uint32_t i = 0; i < n; i++) {
+            const vkrt_gpu_node *s = &b->nodes[slots[i]];
+            if (s->tri_count == 0 && node_area(s) > largest) {
+                largest = node_area(s);
+                open = i;
+            }
+        }
+        if (open == BVH4_EMPTY) break;
+        /* Its children take its slot and the next one, so siblings stay side by side. */
+        uint32_t left = b->nodes[slots[open]].left_first;
+        memmove(&slots[open + 2], &slots[open + 1], (n - open - 1) * sizeof *slots);
+        slots[open] = left;
+        slots[open + 1] = left + 1;
+        n++;
     }
-    w->child[slot] = n->tri_count ? n->left_first : BVH4_EMPTY; /* interior: patched by the caller */
-    w->count[slot] = n->tri_count;
+    return n;
 }
 
-/* A binary interior node still to become wide node `wide`, `depth` levels down. */
-typedef struct collapse_task {
-    uint32_t binary, wide, depth;
-} collapse_task;
+static void set_slot_box(bvh4_node *w, uint32_t i, const vkrt_gpu_node *n)
+{
+    w->lo[0][i] = n->bmin.x, w->lo[1][i] = n->bmin.y, w->lo[2][i] = n->bmin.z;
+    w->hi[0][i] = n->bmax.x, w->hi[1][i] = n->bmax.y, w->hi[2][i] = n->bmax.z;
+}
+
+static void clear_node(bvh4_node *w)
+{
+    for (uint32_t i = 0; i < BVH4_WIDTH; i++) {
+        for (int a = 0; a < 3; a++) w->lo[a][i] = INFINITY, w->hi[a][i] = -INFINITY;
+        w->child[i] = BVH4_EMPTY;
+        w->count[i] = 0;
+    }
+}
 
 vkrt_result bvh4_collapse(core *c, const bvh *b, bvh4 *out)
 {
+    if (!out) return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "bvh4_collapse: out is NULL");
     memset(out, 0, sizeof *out);
-    /* At most one wide node per binary interior node (each wide node consumes one or more). */
-    const uint32_t cap = b->node_count;
-    out->nodes = core_alloc_array(c, cap, sizeof *out->nodes);
-    collapse_task *todo = core_alloc_array(c, cap, sizeof *todo);
-    if (!out->nodes || !todo) {
-        core_free(c, todo);
-        bvh4_destroy(c, out);
-        return core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "out of memory collapsing a BVH of %u nodes", b->node_count);
-    }
+    if (!b || !b->nodes || b->node_count == 0)
+        return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "bvh4_collapse: the binary BVH has no nodes");
+    /* Every wide node stands for one binary interior node, so the interior count bounds them
+     * (a root leaf still needs its one node). */
+    uint32_t capacity = 1;
+    for (uint32_t i = 0; i < b->node_count; i++) capacity += b->nodes[i].tri_count == 0;
+    uint64_t bytes = (uint64_t)capacity * sizeof(bvh4_node) + NODE_ALIGN;
+    if (bytes <= SIZE_MAX) out->allocation = core_alloc(c, (size_t)bytes);
+    if (!out->allocation)
+        return core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "out of memory for %u 4-wide BVH nodes", capacity);
+    uintptr_t base = ((uintptr_t)out->allocation + NODE_ALIGN - 1) & ~(uintptr_t)(NODE_ALIGN - 1);
+    out->nodes = (bvh4_node *)base;
     const vkrt_gpu_node *root = &b->nodes[0];
     out->root_lo[0] = root->bmin.x, out->root_lo[1] = root->bmin.y, out->root_lo[2] = root->bmin.z;
     out->root_hi[0] = root->bmax.x, out->root_hi[1] = root->bmax.y, out->root_hi[2] = root->bmax.z;
-    uint32_t count = 1, pending = 0;
-    todo[pending++] = (collapse_task){ 0, 0, 1 };
-    while (pending) {
-        const uint32_t binary = todo[--pending].binary, wide = todo[pending].wide, depth = todo[pending].depth;
-        if (depth > out->depth) out->depth = depth;
-        uint32_t slots[BVH4_WIDTH], used = 0;
-        const vkrt_gpu_node *n = &b->nodes[binary];
-        if (n->tri_count) {
-            slots[used++] = binary;
-        } else {
-            slots[used++] = n->left_first;
-            slots[used++] = n->left_first + 1;
-        }
-        while (used < BVH4_WIDTH) {
-            int open = -1;
-            float best = -1.0f;
-            for (uint32_t s = 0; s < used; s++) {
-                const vkrt_gpu_node *k = &b->nodes[slots[s]];
-                if (!k->tri_count && node_area(k) > best) best = node_area(k), open = (int)s;
+    out->node_count = 1;
+    out->depth = 1;
+    clear_node(&out->nodes[0]);
+    if (root->tri_count != 0) {
+        set_slot_box(&out->nodes[0], 0, root);
+        out->nodes[0].child[0] = root->left_first;
+        out->nodes[0].count[0] = root->tri_count;
+        return VKRT_OK;
+    }
+    /* Depth first with an explicit stack: each wide node spans at least one binary level, so
+     * a valid tree (at most VKRT_MAX_BVH_DEPTH deep) holds at most BVH4_WIDTH - 1 waiting
+     * siblings per level. */
+    struct { uint32_t binary, wide, level; } stack[BVH4_WIDTH * (VKRT_MAX_BVH_DEPTH + 2)];
+    uint32_t sp = 0;
+    stack[sp].binary = 0, stack[sp].wide = 0, stack[sp++].level = 1;
+    while (sp) {
+        sp--;
+        uint32_t binary = stack[sp].binary, level = stack[sp].level;
+        bvh4_node *w = &out->nodes[stack[sp].wide];
+        if (level > out->depth) out->depth = level;
+        uint32_t slots[BVH4_WIDTH];
+        uint32_t n = gather_slots(b, binary, slots);
+        for (uint32_t i = 0; i < n; i++) {
+            const vkrt_gpu_node *s = &b->nodes[slots[i]];
+            set_slot_box(w, i, s);
+            if (s->tri_count != 0) {
+                w->child[i] = s->left_first;
+                w->count[i] = s->tri_count;
+                continue;
             }
-            if (open < 0) break;
-            const uint32_t first = b->nodes[slots[open]].left_first;
-            slots[open] = first;
-            slots[used++] = first + 1;
-        }
-        bvh4_node *w = &out->nodes[wide];
-        memset(w, 0, sizeof *w);
-        for (uint32_t s = 0; s < BVH4_WIDTH; s++) w->child[s] = BVH4_EMPTY;
-        for (uint32_t s = 0; s < used; s++) {
-            const vkrt_gpu_node *k = &b->nodes[slots[s]];
-            set_slot(w, s, k);
-            if (!k->tri_count) {
-                w->child[s] = count;
-                todo[pending++] = (collapse_task){ slots[s], count++, depth + 1 };
-            }
+            assert(out->node_count < capacity && sp < sizeof stack / sizeof stack[0]);
+            uint32_t k = out->node_count++;
+            clear_node(&out->nodes[k]);
+            w->child[i] = k;
+            stack[sp].binary = slots[i], stack[sp].wide = k, stack[sp++].level = level + 1;
         }
     }
-    core_free(c, todo);
-    out->node_count = count;
     return VKRT_OK;
 }
 
 void bvh4_destroy(core *c, bvh4 *w)
 {
-    core_free(c, w->nodes);
+    if (!w) return;
+    core_free(c, w->allocation);
     memset(w, 0, sizeof *w);
 }

@@ -3,6 +3,7 @@
 #define VKRT_CONTEXT_H
 
 #include "bvh.h"
+#include "bvh_wide.h"
 #include "core.h"
 #include "gpu_trace.h"
 #include "vk_context.h"
@@ -17,6 +18,7 @@ struct vkrt_context {
 struct vkrt_scene {
     vkrt_context *ctx;
     bvh bvh;                   /* nodes and triangle order */
+    bvh4 wide;                 /* CPU backend: bvh collapsed 4-wide, what float traces read */
     vkrt_gpu_tri *tris;        /* packed in BVH order; the CPU backend traces these */
     vkrt_gpu_surface *surfaces; /* per triangle by prim_id: texture coordinates, material */
     vkrt_gpu_material *materials;

@@ -74,6 +74,9 @@ static bool alpha_passes(const cpu_trace_scene *s, uint32_t prim, float u, float
 #define REAL_TFAR_WIDEN VKRT_TFAR_WIDEN_FLOAT
 #include "cpu_trace_real.h"
 
+#include "cpu_trace_bvh4.h"
+#include "cpu_trace_packet4.h"
+
 #define REAL double
 #define R(name) name##_d
 #define REAL_IS_FLOAT 0
@@ -103,6 +106,54 @@ static float refine_hit_distance(vec3_d origin, vec3_d dir, double tmin, double 
     return refined > tmin && refined < tmax ? (float)refined : t;
 }
 
+/* A float ray through the binary traversal, or through the 4-wide one where the scene has it
+ * and no one reads the binary traversal's counts (`counted`): the same hit either way. */
+static hit trace_float(const cpu_trace_scene *s, vkrt_traversal traversal, vkrt_intersector isect, const ray_f *r,
+                       heat_counts *heat, bool any_hit, bool counted)
+{
+    if (s->wide && traversal == VKRT_TRAVERSAL_BVH && !counted) return trace_ray_bvh4_f(s, isect, r, any_hit);
+    return trace_ray_f(s, traversal, isect, r, heat, any_hit);
+}
+
+unsigned cpu_trace_box4_test(const vkrt_gpu_ray *ray, const bvh4_node *n, float best_t, bool simd,
+                             float out_tnear[BVH4_WIDTH])
+{
+    ray_f r = ray_setup_f(v_load_f(ray->origin), v_load_f(ray->dir), ray->tmin, INFINITY);
+#if defined(__SSE2__)
+    if (simd) {
+        box4_ray b = box4_ray_setup(&r);
+        return box4_test_sse2(&b, n, best_t, out_tnear);
+    }
+#else
+    (void)simd;
+#endif
+    return box4_test_scalar(&r, n, best_t, out_tnear);
+}
+
+unsigned cpu_trace_watertight4_test(const vkrt_gpu_ray *ray, const vkrt_gpu_tri *const tris[4], bool simd,
+                                    float out_t[4], float out_u[4], float out_v[4])
+{
+    ray_f r = ray_setup_f(v_load_f(ray->origin), v_load_f(ray->dir), ray->tmin, ray->tmax);
+#if defined(__SSE2__)
+    if (simd) return watertight4_sse2(&r, tris, out_t, out_u, out_v);
+#else
+    (void)simd;
+#endif
+    unsigned mask = 0;
+    for (unsigned l = 0; l < 4; l++)
+        if (intersect_triangle_watertight_f(&r, tris[l], &out_t[l], &out_u[l], &out_v[l])) mask |= 1u << l;
+    return mask;
+}
+
+bool cpu_trace_simd4_available(void)
+{
+#if defined(__SSE2__)
+    return true;
+#else
+    return false;
+#endif
+}
+
 vkrt_gpu_ray cpu_trace_camera_ray(const vkrt_gpu_push *camera, uint32_t x, uint32_t y)
 {
     camera_f cam = { v_load_f(camera->eye), v_load_f(camera->right), v_load_f(camera->up), v_load_f(camera->forward),
@@ -118,7 +169,7 @@ bool cpu_trace_one(const cpu_trace_scene *s, vkrt_traversal traversal, vkrt_inte
     heat_counts heat = { 0 };
     hit best = { .prim = NO_PRIM };
     /* vkrt_gpu_ray and vkrt_ray share one layout (asserted in api.c). */
-    if (ray_from_buffer_f((const vkrt_ray *)ray, &r)) best = trace_ray_f(s, traversal, isect, &r, &heat, any_hit);
+    if (ray_from_buffer_f((const vkrt_ray *)ray, &r)) best = trace_float(s, traversal, isect, &r, &heat, any_hit, false);
     counts->nodes += heat.nodes;
     counts->leaves += heat.leaves;
     counts->tris += heat.tris;
@@ -217,6 +268,15 @@ struct job {
     vkrt_hit *hits;
 };
 
+/* A float hit of pixel (x, y) with its distance refined along the pixel's exact ray. */
+static hit refine_pixel_hit(const job *j, uint32_t x, uint32_t y, hit best)
+{
+    if (best.prim == NO_PRIM) return best;
+    ray_d exact = camera_ray_d(&j->cam_d, x, y);
+    best.t = refine_hit_distance(exact.origin, exact.dir, 0.0, INFINITY, &j->scene->tris[best.tri], best.t);
+    return best;
+}
+
 /* Traces pixel (x, y) into out and adds its traversal counts to *counts. */
 static void trace_pixel(const job *j, uint32_t x, uint32_t y, float out[4], trace_counts *counts)
 {
@@ -236,11 +296,9 @@ static void trace_pixel(const job *j, uint32_t x, uint32_t y, float out[4], trac
             best = trace_ray_d(s, p->traversal, p->intersector, &r, &heat, false);
         } else {
             ray_f r = camera_ray_f(&j->cam_f, x, y);
-            best = trace_ray_f(s, p->traversal, p->intersector, &r, &heat, false);
-            if (best.prim != NO_PRIM) {
-                ray_d exact = camera_ray_d(&j->cam_d, x, y);
-                best.t = refine_hit_distance(exact.origin, exact.dir, 0.0, INFINITY, &s->tris[best.tri], best.t);
-            }
+            /* The heat map and the render counters show the binary traversal (as the GPU's). */
+            best = trace_float(s, p->traversal, p->intersector, &r, &heat, false, p->counters || p->mode == VKRT_MODE_HEATMAP);
+            best = refine_pixel_hit(j, x, y, best);
         }
     }
     shade(s, p, &best, &heat, out);
@@ -249,16 +307,49 @@ static void trace_pixel(const job *j, uint32_t x, uint32_t y, float out[4], trac
     counts->tris += heat.tris;
 }
 
+#if defined(__SSE2__)
+/* Whether a tile's rows go four pixels to a packet: float rays through the 4-wide BVH, which
+ * no counter watches (a camera's neighbouring pixels are always coherent). */
+static bool pixel_packets(const job *j)
+{
+    const cpu_trace_params *p = j->params;
+    return j->scene->wide && !p->lighting && p->precision != VKRT_PRECISION_DOUBLE && p->traversal == VKRT_TRAVERSAL_BVH &&
+           !p->counters && p->mode != VKRT_MODE_HEATMAP;
+}
+
+/* Pixels (x, y) to (x + 3, y) as one packet into out (16 floats), each as trace_pixel gives it. */
+static void trace_pixels4(const job *j, uint32_t x, uint32_t y, float *out)
+{
+    packet4 packet;
+    for (uint32_t l = 0; l < PACKET4_LANES; l++) packet.ray[l] = camera_ray_f(&j->cam_f, x + l, y);
+    packet4_setup(&packet);
+    trace_packet4_f(j->scene, j->params->intersector, false, &packet);
+    for (uint32_t l = 0; l < PACKET4_LANES; l++) {
+        const hit_f *b = &packet.best[l];
+        hit best = refine_pixel_hit(j, x + l, y, (hit){ b->t, b->u, b->v, b->tri, b->prim });
+        shade(j->scene, j->params, &best, &(heat_counts){ 0 }, out + 4 * l);
+    }
+}
+#endif
+
 static bool run_tile(job *j, size_t t)
 {
     const uint32_t width = j->params->camera.width, height = j->params->camera.height;
     uint32_t x0 = (uint32_t)(t % j->tiles_x) * TILE, y0 = (uint32_t)(t / j->tiles_x) * TILE;
     uint32_t x1 = x0 + TILE < width ? x0 + TILE : width, y1 = y0 + TILE < height ? y0 + TILE : height;
     trace_counts counts = { 0 };
+#if defined(__SSE2__)
+    const bool packets = pixel_packets(j);
+#endif
     for (uint32_t y = y0; y < y1; y++) {
         /* Checked per row so a cancel stops a slow (naive, large) tile early. */
         if (atomic_load_explicit(&j->cancel, memory_order_relaxed)) return false;
-        for (uint32_t x = x0; x < x1; x++) trace_pixel(j, x, y, j->out + ((size_t)y * width + x) * 4, &counts);
+        uint32_t x = x0;
+#if defined(__SSE2__)
+        for (; packets && x + PACKET4_LANES <= x1; x += PACKET4_LANES)
+            trace_pixels4(j, x, y, j->out + ((size_t)y * width + x) * 4);
+#endif
+        for (; x < x1; x++) trace_pixel(j, x, y, j->out + ((size_t)y * width + x) * 4, &counts);
     }
     if (j->params->counters) {
         atomic_fetch_add_explicit(&j->count_nodes, counts.nodes, memory_order_relaxed);
@@ -273,6 +364,15 @@ static bool run_tile(job *j, size_t t)
     return true;
 }
 
+/* A float hit as vkrt_trace_rays returns it: the distance refined in double along r. */
+static vkrt_hit public_hit_f(const cpu_trace_scene *s, const ray_f *r, hit best)
+{
+    if (best.prim == NO_PRIM) return (vkrt_hit){ .t = -1.0f, .prim_id = VKRT_NO_HIT };
+    best.t = refine_hit_distance((vec3_d){ r->origin.x, r->origin.y, r->origin.z }, (vec3_d){ r->dir.x, r->dir.y, r->dir.z },
+                                 r->tmin, r->tmax, &s->tris[best.tri], best.t);
+    return (vkrt_hit){ .t = best.t, .prim_id = best.prim, .u = best.u, .v = best.v };
+}
+
 static vkrt_hit trace_one_ray(const job *j, const vkrt_ray *in)
 {
     const cpu_trace_rays_params *p = j->rays_params;
@@ -281,24 +381,55 @@ static vkrt_hit trace_one_ray(const job *j, const vkrt_ray *in)
     if (p->precision == VKRT_PRECISION_DOUBLE) {
         ray_d r;
         if (ray_from_buffer_d(in, &r)) best = trace_ray_d(j->scene, p->traversal, p->intersector, &r, &heat, p->any_hit);
-    } else {
-        ray_f r;
-        if (ray_from_buffer_f(in, &r)) best = trace_ray_f(j->scene, p->traversal, p->intersector, &r, &heat, p->any_hit);
-        if (best.prim != NO_PRIM)
-            best.t = refine_hit_distance((vec3_d){ r.origin.x, r.origin.y, r.origin.z }, (vec3_d){ r.dir.x, r.dir.y, r.dir.z },
-                                         r.tmin, r.tmax, &j->scene->tris[best.tri], best.t);
+        if (best.prim == NO_PRIM) return (vkrt_hit){ .t = -1.0f, .prim_id = VKRT_NO_HIT };
+        return (vkrt_hit){ .t = best.t, .prim_id = best.prim, .u = best.u, .v = best.v };
     }
-    if (best.prim == NO_PRIM) return (vkrt_hit){ .t = -1.0f, .prim_id = VKRT_NO_HIT };
-    return (vkrt_hit){ .t = best.t, .prim_id = best.prim, .u = best.u, .v = best.v };
+    ray_f r;
+    if (!ray_from_buffer_f(in, &r)) return (vkrt_hit){ .t = -1.0f, .prim_id = VKRT_NO_HIT };
+    return public_hit_f(j->scene, &r, trace_float(j->scene, p->traversal, p->intersector, &r, &heat, p->any_hit, false));
 }
+
+#if defined(__SSE2__)
+/* Rays [i, i + 4) as one packet where they are valid and coherent (cpu_trace_packet4.h);
+ * false, with nothing written, where they are not. */
+static bool trace_packet(const job *j, size_t i)
+{
+    const cpu_trace_rays_params *p = j->rays_params;
+    if (!packet4_coherent(&j->rays[i])) return false;
+    packet4 packet;
+    for (int l = 0; l < PACKET4_LANES; l++)
+        if (!ray_from_buffer_f(&j->rays[i + l], &packet.ray[l])) return false;
+    packet4_setup(&packet);
+    trace_packet4_f(j->scene, p->intersector, p->any_hit, &packet);
+    for (int l = 0; l < PACKET4_LANES; l++) {
+        const hit_f *b = &packet.best[l];
+        j->hits[i + l] = public_hit_f(j->scene, &packet.ray[l], (hit){ b->t, b->u, b->v, b->tri, b->prim });
+    }
+    return true;
+}
+#endif
 
 static bool run_ray_block(job *j, size_t block)
 {
     size_t first = block * RAY_BLOCK, end = first + RAY_BLOCK < j->ray_count ? first + RAY_BLOCK : j->ray_count;
-    for (size_t i = first; i < end; i++) {
+#if defined(__SSE2__)
+    const cpu_trace_rays_params *p = j->rays_params;
+    const bool packets = j->scene->wide && p->traversal == VKRT_TRAVERSAL_BVH && p->precision != VKRT_PRECISION_DOUBLE;
+#endif
+    for (size_t i = first, check = first; i < end;) {
         /* Checked every 64 rays so a cancel stops a slow (naive) block early. */
-        if ((i & 63) == 0 && atomic_load_explicit(&j->cancel, memory_order_relaxed)) return false;
+        if (i >= check) {
+            if (atomic_load_explicit(&j->cancel, memory_order_relaxed)) return false;
+            check = i + 64;
+        }
+#if defined(__SSE2__)
+        if (packets && i + PACKET4_LANES <= end && trace_packet(j, i)) {
+            i += PACKET4_LANES;
+            continue;
+        }
+#endif
         j->hits[i] = trace_one_ray(j, &j->rays[i]);
+        i++;
     }
     return true;
 }

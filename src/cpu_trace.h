@@ -6,6 +6,7 @@
 #define VKRT_CPU_TRACE_H
 
 #include "../shaders/vkrt_shared.h"
+#include "bvh_wide.h"
 #include "camera.h"
 #include "core.h"
 #include "trace_counts.h"
@@ -20,6 +21,10 @@ typedef struct cpu_trace_scene {
     const vkrt_gpu_texture *textures;
     const uint32_t *texels;
     bool alpha_tested;                  /* some material is alpha-masked: hits are alpha tested */
+    const bvh4 *wide;                   /* NULL, or the same tree collapsed 4-wide over the same
+                                           triangles: float BVH traces that keep no counters go
+                                           through it instead (cpu_trace_bvh4.h), with the same
+                                           closest hits */
 } cpu_trace_scene;
 
 typedef struct cpu_trace_params {
@@ -66,8 +71,28 @@ vkrt_gpu_ray cpu_trace_camera_ray(const vkrt_gpu_push *camera, uint32_t x, uint3
 
 /* One ray as trace.comp's wavefront variant traces it: the closest hit (or with any_hit the
  * first found) with out_hit->tri the triangle array index and t unrefined; t = -1 and tri =
- * 0xFFFFFFFF on a miss. Adds the traversal counts to *counts. Returns whether it hit. */
+ * 0xFFFFFFFF on a miss. Adds the binary traversal's counts to *counts; with s->wide (and
+ * traversal BVH) the ray goes through the 4-wide tree, which keeps no counts, and *counts is
+ * left as it was. Returns whether it hit. */
 bool cpu_trace_one(const cpu_trace_scene *s, vkrt_traversal traversal, vkrt_intersector isect, const vkrt_gpu_ray *ray,
                    bool any_hit, vkrt_gpu_hit *out_hit, trace_counts *counts);
+
+/* The four-box test of the 4-wide traversal on node n's slots, for the tests that hold it to
+ * the binary one: the float ray made from ray's origin, dir and tmin as every traversal makes
+ * it (no checks: zero, denormal and infinite components pass), tested against best_t. simd:
+ * the SSE2 test the traversal uses where the compiler targets SSE2; false: the portable one
+ * (intersect_box_f per slot). Returns the mask of hit slots (bit i: slot i) and writes each
+ * used slot's entry distance to out_tnear[i]. */
+unsigned cpu_trace_box4_test(const vkrt_gpu_ray *ray, const bvh4_node *n, float best_t, bool simd,
+                             float out_tnear[BVH4_WIDTH]);
+/* The watertight test of the 4-wide traversal's leaves on four triangles, for the tests that
+ * hold it to the scalar one: the float ray made from ray (tmin, tmax as given; no checks).
+ * simd: the SSE2 test of four at once; false: intersect_triangle_watertight_f per triangle.
+ * Returns the mask of hit triangles and writes each hit's t, u, v. */
+unsigned cpu_trace_watertight4_test(const vkrt_gpu_ray *ray, const vkrt_gpu_tri *const tris[4], bool simd,
+                                    float out_t[4], float out_u[4], float out_v[4]);
+/* Whether cpu_trace_box4_test and cpu_trace_watertight4_test run SSE2 code with simd (else
+ * they are the portable tests). */
+bool cpu_trace_simd4_available(void);
 
 #endif

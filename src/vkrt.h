@@ -247,7 +247,8 @@ typedef struct vkrt_scene_stats {
     uint64_t leaf_histogram[VKRT_LEAF_HISTOGRAM_BINS]; /* [i]: leaves with i + 1 triangles */
     double sah_cost;               /* C_trav = C_isect = 1, relative to the root's area */
     double load_ms, build_ms;      /* wall-clock times of parsing and BVH construction */
-    uint64_t node_bytes, triangle_bytes; /* device (and CPU backend) buffers */
+    uint64_t node_bytes, triangle_bytes; /* device (and CPU backend) buffers; the CPU backend's
+                                            nodes include its 4-wide BVH */
     float bounds_min[3], bounds_max[3];  /* of the scene as traced */
     uint32_t materials;            /* materials in the table: the file's (or the meshes') that
                                       triangles use, and the default where one names none */

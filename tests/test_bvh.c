@@ -2,7 +2,8 @@
  * boxes are exact, statistics are consistent, degenerate input terminates with a bounded
  * depth, max_leaf_size holds, cancellation and out-of-memory leave nothing behind; the SAH
  * builder's BVH is the same on any number of threads; and the same on every mesh of the shared
- * model set. */
+ * model set. Every tree built here is also collapsed 4-wide (bvh_wide.h) and checked against
+ * itself. */
 #include <dirent.h>
 #include <float.h>
 #include <math.h>
@@ -12,6 +13,7 @@
 #include <string.h>
 
 #include "bvh.h"
+#include "bvh_wide.h"
 #include "check.h"
 #include "core.h"
 #include "mesh.h"
@@ -163,7 +165,114 @@ static void check_stats(const char *what, const bvh *b, const bvh_stats *s)
     CHECK_MSG(isfinite(s->sah_cost) && s->sah_cost >= 1.0 - 1e-9 * (double)s->nodes, "%s: SAH cost %g", what, s->sah_cost);
 }
 
-/* Builds, validates, checks boxes and statistics; the tree is left in *out (destroy it). */
+static bool same_bits(float a, float b) { return memcmp(&a, &b, sizeof a) == 0; }
+
+/* The 4-wide collapse of b: every wide node reached once from the root, used slots first,
+ * unused ones BVH4_EMPTY with count 0 and the empty box; each leaf slot is one of b's leaves
+ * (same triangles, box copied bit for bit), each binary leaf in exactly one slot, so every
+ * triangle is reached exactly once; an interior slot's box is exactly the union of its child's
+ * slot boxes (as b's boxes are of their children's), so it is the binary node's box; a node
+ * with a free slot has only leaves (the collapse opens interior children while it can); depth
+ * counts the levels and never exceeds b's. */
+static void check_bvh4(core *c, const char *what, const bvh *b)
+{
+    bvh4 w;
+    vkrt_result r = bvh4_collapse(c, b, &w);
+    CHECK_MSG(r == VKRT_OK, "%s: bvh4_collapse: %s (%s)", what, vkrt_result_string(r), c->last_error);
+    if (r != VKRT_OK) return;
+    CHECK_MSG(((uintptr_t)w.nodes & 63) == 0, "%s: the 4-wide nodes are not 64-byte aligned", what);
+    uint32_t interior = 0;
+    for (uint32_t i = 0; i < b->node_count; i++) interior += b->nodes[i].tri_count == 0;
+    CHECK_MSG(w.node_count >= 1 && w.node_count <= (interior ? interior : 1), "%s: %u wide nodes for %u interior",
+              what, w.node_count, interior);
+    const vkrt_gpu_node *root = &b->nodes[0];
+    CHECK(same_bits(w.root_lo[0], root->bmin.x) && same_bits(w.root_lo[1], root->bmin.y) &&
+          same_bits(w.root_lo[2], root->bmin.z) && same_bits(w.root_hi[0], root->bmax.x) &&
+          same_bits(w.root_hi[1], root->bmax.y) && same_bits(w.root_hi[2], root->bmax.z));
+    /* leaf_at[k]: the binary leaf whose triangles start at position k, or 0 (the root is never
+     * a leaf's child, and a root leaf is looked up as node 0 below). */
+    uint32_t *leaf_at = calloc(b->tri_count, sizeof *leaf_at);
+    uint8_t *leaf_used = calloc(b->node_count, 1), *node_seen = calloc(w.node_count, 1);
+    if (!leaf_at || !leaf_used || !node_seen) abort();
+    for (uint32_t i = 0; i < b->node_count; i++)
+        if (b->nodes[i].tri_count) leaf_at[b->nodes[i].left_first] = i;
+    struct { uint32_t node, level; float lo[3], hi[3]; } stack[BVH4_WIDTH * (VKRT_MAX_BVH_DEPTH + 2)];
+    uint32_t sp = 0, levels = 0, errors = 0;
+    stack[sp].node = 0, stack[sp].level = 1;
+    memcpy(stack[sp].lo, w.root_lo, sizeof w.root_lo);
+    memcpy(stack[sp++].hi, w.root_hi, sizeof w.root_hi);
+    while (sp && errors < 3) {
+        sp--;
+        uint32_t i = stack[sp].node, level = stack[sp].level;
+        float plo[3], phi[3];
+        memcpy(plo, stack[sp].lo, sizeof plo);
+        memcpy(phi, stack[sp].hi, sizeof phi);
+        if (i >= w.node_count || node_seen[i]) {
+            CHECK_MSG(0, "%s: wide node %u is out of range or reached twice", what, i);
+            errors++;
+            continue;
+        }
+        node_seen[i] = 1;
+        if (level > levels) levels = level;
+        const bvh4_node *n = &w.nodes[i];
+        uint32_t used = 0;
+        bool has_interior = false;
+        float ulo[3] = { INFINITY, INFINITY, INFINITY }, uhi[3] = { -INFINITY, -INFINITY, -INFINITY };
+        for (uint32_t k = 0; k < BVH4_WIDTH; k++) {
+            if (n->child[k] == BVH4_EMPTY) {
+                bool empty_box = true;
+                for (int a = 0; a < 3; a++) empty_box &= n->lo[a][k] == INFINITY && n->hi[a][k] == -INFINITY;
+                CHECK_MSG(n->count[k] == 0 && empty_box, "%s: unused slot %u of wide node %u has count %u or a box", what,
+                          k, i, n->count[k]);
+                continue;
+            }
+            if (used++ != k) {
+                CHECK_MSG(0, "%s: wide node %u uses slot %u after an unused one", what, i, k);
+                errors++;
+            }
+            for (int a = 0; a < 3; a++) {
+                ulo[a] = fminf(ulo[a], n->lo[a][k]);
+                uhi[a] = fmaxf(uhi[a], n->hi[a][k]);
+            }
+            if (n->count[k] == 0) {
+                has_interior = true;
+                stack[sp].node = n->child[k], stack[sp].level = level + 1;
+                for (int a = 0; a < 3; a++) stack[sp].lo[a] = n->lo[a][k], stack[sp].hi[a] = n->hi[a][k];
+                sp++;
+                continue;
+            }
+            uint32_t first = n->child[k], leaf = first < b->tri_count ? leaf_at[first] : 0;
+            const vkrt_gpu_node *l = &b->nodes[leaf];
+            bool same = l->tri_count == n->count[k] && l->left_first == first && !leaf_used[leaf] &&
+                        same_bits(n->lo[0][k], l->bmin.x) && same_bits(n->lo[1][k], l->bmin.y) &&
+                        same_bits(n->lo[2][k], l->bmin.z) && same_bits(n->hi[0][k], l->bmax.x) &&
+                        same_bits(n->hi[1][k], l->bmax.y) && same_bits(n->hi[2][k], l->bmax.z);
+            CHECK_MSG(same, "%s: leaf slot %u of wide node %u (triangles %u + %u) is no unused binary leaf", what, k, i,
+                      first, n->count[k]);
+            errors += !same;
+            leaf_used[leaf] = 1;
+        }
+        CHECK_MSG(used >= (i == 0 && root->tri_count ? 1u : 2u), "%s: wide node %u uses %u slots", what, i, used);
+        CHECK_MSG(used == BVH4_WIDTH || !has_interior, "%s: wide node %u has a free slot and an interior child", what, i);
+        bool encloses = true;
+        for (int a = 0; a < 3; a++) encloses &= ulo[a] == plo[a] && uhi[a] == phi[a];
+        CHECK_MSG(encloses, "%s: wide node %u's slots do not make up its parent's box", what, i);
+        errors += !encloses;
+    }
+    for (uint32_t i = 0; i < w.node_count; i++) CHECK_MSG(node_seen[i], "%s: wide node %u is unreachable", what, i);
+    for (uint32_t i = 0; i < b->node_count; i++)
+        if (b->nodes[i].tri_count) CHECK_MSG(leaf_used[i], "%s: binary leaf %u is in no wide slot", what, i);
+    CHECK_MSG(w.depth == levels && w.depth <= (b->depth ? b->depth : 1), "%s: wide depth %u, %u levels, binary %u",
+              what, w.depth, levels, b->depth);
+    free(leaf_at);
+    free(leaf_used);
+    free(node_seen);
+    bvh4_destroy(c, &w);
+    CHECK(w.nodes == NULL && w.node_count == 0);
+}
+
+/* Builds, validates, checks boxes and statistics and the 4-wide collapse; the tree is left in
+ * *out (destroy it). */
 static vkrt_result build_checked(core *c, const char *what, const mesh *m, vkrt_bvh_builder builder,
                                  uint32_t max_leaf, uint32_t threads, bvh *out, bvh_stats *stats)
 {
@@ -178,6 +287,7 @@ static vkrt_result build_checked(core *c, const char *what, const mesh *m, vkrt_
         check_exact_boxes(what, out, m);
         bvh_compute_stats(out, stats);
         check_stats(what, out, stats);
+        check_bvh4(c, what, out);
     } else {
         memset(stats, 0, sizeof *stats);
     }
@@ -735,6 +845,36 @@ static void bvh_sah_parallel_out_of_memory_and_cancel_without_leak(void)
     CHECK_EQ_U64(k.allocs, k.frees);
 }
 
+/* The collapse makes one allocation: failing it is VKRT_ERROR_OUT_OF_MEMORY with *out zeroed
+ * and nothing leaked; an empty tree is an invalid argument; destroy accepts NULL and zeroes. */
+static void bvh4_collapse_fails_cleanly(void)
+{
+    counting k = { 0 };
+    core c;
+    core_init(&c, &(vkrt_allocator){ counting_alloc, counting_free, &k }, NULL, NULL);
+    mesh m = make_random(&c, 500);
+    bvh b;
+    CHECK(bvh_build(&c, &m, NULL, &b) == VKRT_OK);
+    bvh4 w;
+    memset(&w, 0xab, sizeof w);
+    k.calls = 0;
+    k.fail_at = 1;
+    CHECK(bvh4_collapse(&c, &b, &w) == VKRT_ERROR_OUT_OF_MEMORY);
+    k.fail_at = 0;
+    CHECK(w.nodes == NULL && w.allocation == NULL && w.node_count == 0);
+    CHECK(strstr(c.last_error, "out of memory") != NULL);
+    bvh empty = { 0 };
+    CHECK(bvh4_collapse(&c, &empty, &w) == VKRT_ERROR_INVALID_ARGUMENT);
+    CHECK(bvh4_collapse(&c, NULL, &w) == VKRT_ERROR_INVALID_ARGUMENT && w.nodes == NULL);
+    CHECK(bvh4_collapse(&c, &b, &w) == VKRT_OK && w.node_count > 1);
+    bvh4_destroy(&c, &w);
+    bvh4_destroy(&c, &w);
+    bvh4_destroy(&c, NULL);
+    bvh_destroy(&c, &b);
+    test_mesh_free(&c, &m);
+    CHECK_EQ_U64(k.allocs, k.frees);
+}
+
 static void bvh_validate_reports_broken_trees(void)
 {
     core c;
@@ -851,6 +991,7 @@ int main(void)
     RUN(bvh_out_of_memory_at_every_allocation_without_leak);
     RUN(bvh_sah_is_identical_on_any_thread_count);
     RUN(bvh_sah_parallel_out_of_memory_and_cancel_without_leak);
+    RUN(bvh4_collapse_fails_cleanly);
     RUN(bvh_validate_reports_broken_trees);
     RUN(bvh_shared_models_are_valid_and_sah_is_cheaper);
     return check_exit();

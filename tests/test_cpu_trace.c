@@ -1,7 +1,9 @@
 /* The C reference tracer: camera, packing, analytic depths and normals, the promise that BVH
  * and naive traversal (and every builder) give bit-identical closest hits with either
  * intersector, watertightness, the double-precision reference, vkrt_trace_rays and
- * secondary-ray origins. */
+ * secondary-ray origins; and that the 4-wide traversal (cpu_trace_bvh4.h) is the binary one's
+ * answer, box test by box test and hit by hit. */
+#include <float.h>
 #include <math.h>
 #include <pthread.h>
 #include <stdatomic.h>
@@ -13,6 +15,7 @@
 #include "bvh.h"
 #include "camera.h"
 #include "check.h"
+#include "context.h"
 #include "core.h"
 #include "cpu_trace.h"
 #include "mesh.h"
@@ -971,6 +974,275 @@ static void eye_inside_a_closed_mesh_always_hits(void)
     closed_mesh_free(&m);
 }
 
+/* ---- the 4-wide traversal against the binary one ---- */
+
+static bool same_float(float a, float b) { return memcmp(&a, &b, sizeof a) == 0 || (isnan(a) && isnan(b)); }
+
+/* The SIMD four-box test equals the portable one (intersect_box_f per slot), hit mask and
+ * entry distances bit for bit, on what the slab rules exist for: +0 and -0 direction
+ * components (infinite reciprocals), denormal and huge components, origins on a box's planes
+ * and corners, flat and infinite boxes, boxes touching the origin, inverted and NaN boxes,
+ * unused slots, and best_t of 0, -0, +inf and NaN. */
+static void bvh4_box_test_simd_equals_binary_box_test_on_hostile_inputs(void)
+{
+    if (!cpu_trace_simd4_available()) {
+        fprintf(stderr, "  no SIMD box test in this build: the portable one is intersect_box_f itself\n");
+        return;
+    }
+    const float comps[] = { 0.0f, -0.0f, 1.0f, -1.0f, 0.5f, -0.25f, 1e-40f, -1e-40f, 3e38f, -3e38f, 1e-20f };
+    const float coords[] = { 0.0f, -0.0f, 1.0f, -1.0f, 0.5f, 2.0f, -3.0f, INFINITY, -INFINITY, FLT_MAX, -FLT_MAX, 1e-30f };
+    const float bests[] = { INFINITY, 0.0f, -0.0f, 1.0f, 1e-30f, 3.5f, NAN };
+    const size_t nc = sizeof comps / sizeof comps[0], nx = sizeof coords / sizeof coords[0];
+    test_rng rng = { 2024 };
+    size_t tests = 0, hits = 0, differ = 0;
+    for (int iter = 0; iter < 200000; iter++) {
+        vkrt_gpu_ray ray = { .tmin = iter % 5 == 0 ? 0.0f : iter % 5 == 1 ? -0.0f : iter % 5 == 2 ? 1e-3f : iter % 5 == 3 ? -INFINITY : 0.75f };
+        float o[3], d[3];
+        for (int a = 0; a < 3; a++) {
+            d[a] = comps[(size_t)(rng_uniform(&rng) * nc)];
+            /* Origins on the coordinate grid the boxes use, so they sit on planes and corners. */
+            o[a] = rng_uniform(&rng) < 0.6 ? coords[(size_t)(rng_uniform(&rng) * 6)] : (float)(4.0 * rng_uniform(&rng) - 2.0);
+        }
+        ray.origin = (vkrt_float3){ o[0], o[1], o[2] };
+        ray.dir = (vkrt_float3){ d[0], d[1], d[2] };
+        bvh4_node n;
+        for (int k = 0; k < BVH4_WIDTH; k++) {
+            double kind = rng_uniform(&rng);
+            n.child[k] = kind < 0.08 ? BVH4_EMPTY : (uint32_t)k;
+            n.count[k] = 0;
+            for (int a = 0; a < 3; a++) {
+                float lo = coords[(size_t)(rng_uniform(&rng) * nx)], hi = coords[(size_t)(rng_uniform(&rng) * nx)];
+                if (kind < 0.5 && lo > hi) {
+                    float t = lo;
+                    lo = hi, hi = t;
+                } else if (kind < 0.6) {
+                    hi = lo; /* flat */
+                } else if (kind < 0.7) {
+                    lo = o[a], hi = o[a] + 1.0f; /* touching the origin */
+                } else if (kind < 0.72) {
+                    lo = NAN;
+                }
+                n.lo[a][k] = lo, n.hi[a][k] = hi;
+            }
+        }
+        float best = bests[(size_t)(rng_uniform(&rng) * (sizeof bests / sizeof bests[0]))];
+        float t_simd[BVH4_WIDTH], t_scalar[BVH4_WIDTH];
+        unsigned m_simd = cpu_trace_box4_test(&ray, &n, best, true, t_simd);
+        unsigned m_scalar = cpu_trace_box4_test(&ray, &n, best, false, t_scalar);
+        bool same = m_simd == m_scalar;
+        for (int k = 0; k < BVH4_WIDTH; k++)
+            if (n.child[k] != BVH4_EMPTY) same = same && same_float(t_simd[k], t_scalar[k]);
+        if (!same && differ++ < 3)
+            fprintf(stderr, "  differ: o (%g %g %g) d (%g %g %g) tmin %g best %g: masks %x %x\n", o[0], o[1], o[2], d[0],
+                    d[1], d[2], ray.tmin, best, m_simd, m_scalar);
+        tests++;
+        for (unsigned k = 0; k < BVH4_WIDTH; k++) hits += (m_scalar >> k) & 1u;
+    }
+    fprintf(stderr, "  %zu four-box tests, %zu boxes hit, %zu differ\n", tests, hits, differ);
+    CHECK_EQ_U64(differ, 0);
+    CHECK(hits > tests / 10);
+}
+
+/* The SIMD four-triangle watertight test equals intersect_triangle_watertight_f, answer and
+ * t, u, v bit for bit, where its special cases live: corners on a small integer grid and rays
+ * from grid points along grid directions and at corners and edge midpoints (edge values of
+ * exactly 0, the double re-evaluation), degenerate triangles (det = 0), rays in a triangle's
+ * plane, +-0 direction components and hits at tmin and tmax. */
+static void watertight4_equals_scalar_watertight_on_hostile_triangles(void)
+{
+    if (!cpu_trace_simd4_available()) {
+        fprintf(stderr, "  no SIMD triangle test in this build\n");
+        return;
+    }
+    test_rng rng = { 4077 };
+    vkrt_gpu_tri tri[4];
+    size_t tests = 0, hits = 0, differ = 0;
+    for (int iter = 0; iter < 100000; iter++) {
+        for (int l = 0; l < 4; l++) {
+            float p[9];
+            for (int k = 0; k < 9; k++) p[k] = (float)(int)(5.0 * rng_uniform(&rng)) - 2.0f;
+            double kind = rng_uniform(&rng);
+            if (kind < 0.1) memcpy(p + 6, p + 3, 3 * sizeof *p); /* two corners equal */
+            else if (kind < 0.2)
+                for (int k = 0; k < 3; k++) p[6 + k] = 2.0f * p[3 + k] - p[k]; /* collinear */
+            else if (kind < 0.3)
+                for (int k = 0; k < 9; k++) p[k] += (float)(rng_uniform(&rng) - 0.5); /* off the grid */
+            tri[l] = (vkrt_gpu_tri){ .v0 = { p[0], p[1], p[2] }, .prim_id = (uint32_t)l, .v1 = { p[3], p[4], p[5] },
+                                     .v2 = { p[6], p[7], p[8] } };
+        }
+        const vkrt_gpu_tri *const tris[4] = { &tri[0], &tri[1], &tri[2], &tri[3] };
+        vkrt_gpu_ray ray = { .tmin = 0.0f, .tmax = INFINITY };
+        float o[3], target[3];
+        for (int k = 0; k < 3; k++) o[k] = (float)(int)(7.0 * rng_uniform(&rng)) - 3.0f;
+        const vkrt_gpu_tri *aim = &tri[(int)(4.0 * rng_uniform(&rng))];
+        const float corner[3][3] = { { aim->v0.x, aim->v0.y, aim->v0.z }, { aim->v1.x, aim->v1.y, aim->v1.z },
+                                     { aim->v2.x, aim->v2.y, aim->v2.z } };
+        double how = rng_uniform(&rng);
+        for (int k = 0; k < 3; k++) {
+            if (how < 0.3) target[k] = corner[0][k];                                   /* a corner */
+            else if (how < 0.6) target[k] = 0.5f * (corner[0][k] + corner[1][k]);     /* an edge midpoint */
+            else if (how < 0.8) target[k] = (corner[0][k] + corner[1][k] + corner[2][k]) / 3.0f;
+            else target[k] = o[k] + (float)(int)(3.0 * rng_uniform(&rng)) - 1.0f;      /* a grid direction */
+        }
+        ray.origin = (vkrt_float3){ o[0], o[1], o[2] };
+        ray.dir = (vkrt_float3){ target[0] - o[0], target[1] - o[1], target[2] - o[2] };
+        if (ray.dir.x == 0 && ray.dir.y == 0 && ray.dir.z == 0) ray.dir.z = -0.0f, ray.dir.x = 1.0f;
+        if (iter % 7 == 0) ray.tmin = 1.0f; /* the target at t = 1 sits on the boundary */
+        if (iter % 11 == 0) ray.tmax = 1.0f;
+        float t[2][4], u[2][4], v[2][4];
+        unsigned m_simd = cpu_trace_watertight4_test(&ray, tris, true, t[0], u[0], v[0]);
+        unsigned m_scalar = cpu_trace_watertight4_test(&ray, tris, false, t[1], u[1], v[1]);
+        bool same = m_simd == m_scalar;
+        for (int l = 0; l < 4; l++)
+            if (m_scalar & (1u << l)) same = same && same_float(t[0][l], t[1][l]) && same_float(u[0][l], u[1][l]) &&
+                                              same_float(v[0][l], v[1][l]);
+        if (!same && differ++ < 3)
+            fprintf(stderr, "  differ: o (%g %g %g) d (%g %g %g): masks %x %x\n", o[0], o[1], o[2], ray.dir.x, ray.dir.y,
+                    ray.dir.z, m_simd, m_scalar);
+        tests += 4;
+        for (int l = 0; l < 4; l++) hits += (m_scalar >> l) & 1u;
+    }
+    fprintf(stderr, "  %zu triangle tests, %zu hit, %zu groups of four differ\n", tests, hits, differ);
+    CHECK_EQ_U64(differ, 0);
+    CHECK(hits > tests / 20);
+}
+
+/* Rays for the identity test, in a new array: the camera rays of three views (one from inside
+ * the model's box), rays from random points of the box in random directions, and from each
+ * camera hit four cosine-distributed rays about the facing geometric normal from
+ * vkrt_ray_offset's origin, half up to 0.5 (the ao mode's and the bench's) and half unbounded. */
+static vkrt_ray *identity_rays(const cpu_trace_scene *binary, size_t *out_count)
+{
+    enum { W = 96, H = 96, VIEWS = 3, RANDOM = 20000, AO_PER_HIT = 4 };
+    const vkrt_camera views[VIEWS] = { { .fov_y_degrees = 0.0f }, { .eye = { 0.8f, 0.4f, 1.2f } },
+                                       { .eye = { 0.05f, 0.1f, 0.3f }, .target = { -0.2f, 0.0f, -0.4f }, .fov_y_degrees = 100 } };
+    size_t cap = (size_t)VIEWS * W * H * (1 + AO_PER_HIT) + RANDOM, n = 0;
+    vkrt_ray *rays = calloc(cap, sizeof *rays);
+    if (!rays) abort();
+    for (int v = 0; v < VIEWS; v++) CHECK(vkrt_camera_rays(cpu, &views[v], W, H, rays + n + (size_t)v * W * H, (size_t)W * H) == VKRT_OK);
+    n += (size_t)VIEWS * W * H;
+    size_t primary = n;
+    vkrt_ray *random = random_rays_in_box(RANDOM, 77);
+    memcpy(rays + n, random, RANDOM * sizeof *rays);
+    free(random);
+    n += RANDOM;
+    test_rng rng = { 5 };
+    for (size_t i = 0; i < primary; i++) {
+        vkrt_gpu_ray g;
+        vkrt_gpu_hit h;
+        trace_counts ignored = { 0 };
+        memcpy(&g, &rays[i], sizeof g);
+        if (!cpu_trace_one(binary, VKRT_TRAVERSAL_BVH, VKRT_INTERSECTOR_WATERTIGHT, &g, false, &h, &ignored)) continue;
+        const vkrt_gpu_tri *t = &binary->tris[h.tri];
+        float w = 1.0f - h.u - h.v, p[3], nrm[3] = { t->face_n.x, t->face_n.y, t->face_n.z };
+        const float v0[3] = { t->v0.x, t->v0.y, t->v0.z }, v1[3] = { t->v1.x, t->v1.y, t->v1.z }, v2[3] = { t->v2.x, t->v2.y, t->v2.z };
+        for (int a = 0; a < 3; a++) p[a] = v0[a] * w + v1[a] * h.u + v2[a] * h.v;
+        if (nrm[0] * g.dir.x + nrm[1] * g.dir.y + nrm[2] * g.dir.z > 0.0f)
+            for (int a = 0; a < 3; a++) nrm[a] = -nrm[a];
+        float origin[3];
+        vkrt_ray_offset(p, nrm, origin);
+        for (int k = 0; k < AO_PER_HIT; k++) {
+            double d[3];
+            rng_unit_vector(&rng, d);
+            double dn = d[0] * nrm[0] + d[1] * nrm[1] + d[2] * nrm[2];
+            for (int a = 0; a < 3; a++) d[a] += nrm[a] - (dn < 0 ? 2.0 * dn * nrm[a] : 0.0); /* cosine-like, outward */
+            vkrt_ray *r = &rays[n++];
+            *r = (vkrt_ray){ .tmax = k % 2 ? 0.0f : 0.5f };
+            memcpy(r->origin, origin, sizeof origin);
+            for (int a = 0; a < 3; a++) r->dir[a] = (float)d[a];
+        }
+    }
+    *out_count = n;
+    return rays;
+}
+
+/* On real meshes, every ray of identity_rays through the binary and the 4-wide traversal, with
+ * both intersectors: closest hits identical (t, u, v and triangle, so prim_id, bit for bit),
+ * one ray at a time and through cpu_trace_rays (with the refined distance); any-hit rays hit
+ * exactly where the closest-hit ones do, no nearer. Renders without counters are the same
+ * images; the heat map and the counters come from the binary traversal either way. */
+static void bvh4_and_binary_traversal_give_identical_hits(void)
+{
+    const char *files[2] = { "bunny.obj", "dragon_11k.obj" };
+    for (int f = 0; f < 2; f++) {
+        vkrt_scene *s = model_scene(files[f]);
+        if (!s) continue;
+        CHECK_MSG(s->wide.nodes != NULL, "%s: the CPU scene has no 4-wide BVH", files[f]);
+        const cpu_trace_scene binary = { .nodes = s->bvh.nodes, .node_count = s->bvh.node_count, .tris = s->tris,
+                                         .tri_count = s->bvh.tri_count };
+        cpu_trace_scene wide = binary;
+        wide.wide = &s->wide;
+        size_t n;
+        vkrt_ray *rays = identity_rays(&binary, &n);
+        vkrt_hit *hb = calloc(n, sizeof *hb), *hw = calloc(n, sizeof *hw);
+        if (!hb || !hw) abort();
+        for (int isect = VKRT_INTERSECTOR_WATERTIGHT; isect <= VKRT_INTERSECTOR_MOLLER_TRUMBORE; isect++) {
+            size_t hits = 0, differ = 0, any_differ = 0;
+            for (size_t i = 0; i < n; i++) {
+                vkrt_gpu_ray g;
+                memcpy(&g, &rays[i], sizeof g);
+                vkrt_gpu_hit a, b, any_a, any_b;
+                trace_counts counts = { 0 }, wide_counts = { 0 };
+                bool hit_a = cpu_trace_one(&binary, VKRT_TRAVERSAL_BVH, (vkrt_intersector)isect, &g, false, &a, &counts);
+                bool hit_b = cpu_trace_one(&wide, VKRT_TRAVERSAL_BVH, (vkrt_intersector)isect, &g, false, &b, &wide_counts);
+                bool any_hit_a = cpu_trace_one(&binary, VKRT_TRAVERSAL_BVH, (vkrt_intersector)isect, &g, true, &any_a, &counts);
+                bool any_hit_b = cpu_trace_one(&wide, VKRT_TRAVERSAL_BVH, (vkrt_intersector)isect, &g, true, &any_b, &wide_counts);
+                hits += hit_a;
+                if (hit_a != hit_b || memcmp(&a, &b, sizeof a) != 0) {
+                    if (differ++ < 3)
+                        fprintf(stderr, "  ray %zu: binary tri %u t %.9g, 4-wide tri %u t %.9g\n", i, a.tri, a.t, b.tri, b.t);
+                }
+                any_differ += any_hit_a != hit_a || any_hit_b != hit_a || (any_hit_b && !(any_b.t >= a.t));
+                CHECK(wide_counts.nodes == 0 && wide_counts.tris == 0);
+            }
+            fprintf(stderr, "  %s isect %d: %zu rays (%zu hit): %zu closest hits differ, %zu any-hit answers\n",
+                    files[f], isect, n, hits, differ, any_differ);
+            CHECK_EQ_U64(differ, 0);
+            CHECK_EQ_U64(any_differ, 0);
+            CHECK(hits > n / 10);
+            for (int any = 0; any < 2; any++) {
+                cpu_trace_rays_params p = { .traversal = VKRT_TRAVERSAL_BVH, .any_hit = any,
+                                            .intersector = (vkrt_intersector)isect, .threads = 2 };
+                CHECK(cpu_trace_rays(&c, &binary, &p, rays, n, hb) == VKRT_OK);
+                CHECK(cpu_trace_rays(&c, &wide, &p, rays, n, hw) == VKRT_OK);
+                if (!any) {
+                    CHECK_MSG(memcmp(hb, hw, n * sizeof *hb) == 0, "%s isect %d: cpu_trace_rays differ", files[f], isect);
+                    continue;
+                }
+                size_t disagree = 0;
+                for (size_t i = 0; i < n; i++) disagree += (hb[i].prim_id == VKRT_NO_HIT) != (hw[i].prim_id == VKRT_NO_HIT);
+                CHECK_EQ_U64(disagree, 0);
+            }
+        }
+        /* Renders: the same images in the modes that read hits; the counted ones equal too. */
+        const uint32_t w = 64, h = 48;
+        vkrt_gpu_push cam;
+        camera_basis cam_d;
+        CHECK(camera_setup(&c, &(vkrt_camera){ 0 }, w, h, &cam) == VKRT_OK);
+        CHECK(camera_setup_double(&c, &(vkrt_camera){ 0 }, w, h, &cam_d) == VKRT_OK);
+        float *ib = malloc((size_t)w * h * 4 * sizeof *ib), *iw = malloc((size_t)w * h * 4 * sizeof *iw);
+        if (!ib || !iw) abort();
+        for (vkrt_mode m = VKRT_MODE_NORMAL; m <= VKRT_MODE_ID; m++) {
+            for (int counted = 0; counted < 2; counted++) {
+                cpu_trace_params p = { .camera = cam, .mode = m, .traversal = VKRT_TRAVERSAL_BVH, .heat = VKRT_HEAT_NODES,
+                                       .camera_d = cam_d, .counters = counted, .threads = 2 };
+                trace_counts cb, cw;
+                CHECK(cpu_trace_render(&c, &binary, &p, ib, &cb) == VKRT_OK);
+                CHECK(cpu_trace_render(&c, &wide, &p, iw, &cw) == VKRT_OK);
+                CHECK_MSG(memcmp(ib, iw, (size_t)w * h * 4 * sizeof *ib) == 0, "%s mode %d: images differ", files[f], (int)m);
+                CHECK(cb.nodes == cw.nodes && cb.leaves == cw.leaves && cb.tris == cw.tris);
+                if (counted) CHECK(cw.nodes > 0 && cw.tris > 0);
+            }
+        }
+        free(ib);
+        free(iw);
+        free(hb);
+        free(hw);
+        free(rays);
+        vkrt_scene_destroy(s);
+    }
+}
+
 int main(void)
 {
     core_init(&c, NULL, NULL, NULL);
@@ -992,6 +1264,9 @@ int main(void)
     RUN(cpu_float_watertight_never_misses_shared_edges_and_vertices);
     RUN(cpu_double_watertight_never_misses_shared_edges_and_vertices);
     RUN(cpu_trace_rays_bvh_naive_and_precisions_agree);
+    RUN(bvh4_box_test_simd_equals_binary_box_test_on_hostile_inputs);
+    RUN(watertight4_equals_scalar_watertight_on_hostile_triangles);
+    RUN(bvh4_and_binary_traversal_give_identical_hits);
     RUN(double_reference_and_float_agree_on_camera_renders);
     RUN(eye_inside_a_closed_mesh_always_hits);
     RUN(cpu_grazing_hit_distances_are_exact);
