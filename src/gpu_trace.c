@@ -105,7 +105,9 @@ static vkrt_result upload_wide(vk_context *vk, const bvh *b, const vkrt_gpu_tri 
 {
     wide_arrays w = { 0 };
     vkrt_result r = VKRT_OK;
+    const double t0 = core_now_ms();
     if (!out->split_shift && !vk->no_wide_traversal) r = wide_pack(vk->core, b, tris, &w);
+    out->wide_pack_ms = core_now_ms() - t0;
     if (r != VKRT_OK) return r;
     const uint64_t texel_limit = vk->properties.limits.maxTexelBufferElements;
     const bool usable = w.node_count && wide_traversal_fits(w.depth, w.tri_count) &&

@@ -1,5 +1,6 @@
 #include "wide_pack.h"
 
+#include <math.h>
 #include <string.h>
 
 #include "bvh_wide.h"
@@ -48,20 +49,28 @@ static void quantise_axis(const bvh4_node *n, int axis, uint32_t used, float *ou
     /* The smallest exponent whose 255 steps from lo reach hi (0: a flat axis, scale 0). */
     uint32_t e = 0;
     if (hi > lo) {
-        e = 1;
+        /* From the exponent of (hi - lo) / 255 (frexp), up while 255 steps fall short. */
+        int exponent;
+        frexp(((double)hi - lo) / 255.0, &exponent);
+        e = exponent + 126 < 1 ? 1 : exponent + 126 > 254 ? 254 : (uint32_t)(exponent + 126);
+        while (e > 1 && dequantise(lo, scale_of(e - 1), 255) >= hi) e--;
         while (e < 254 && dequantise(lo, scale_of(e), 255) < hi) e++;
     }
     const float scale = scale_of(e);
     for (uint32_t s = 0; s < BVH4_WIDTH; s++) {
         q_lo[s] = q_hi[s] = 0;
         if (s >= used || e == 0) continue;
-        uint32_t a = 0, b = 255;
-        /* Binary searches over the 256 steps: the highest decoding at or below the child's
-         * lower bound and the lowest at or above its upper one. */
-        for (uint32_t step = 128; step; step >>= 1)
-            if (a + step <= 255 && dequantise(lo, scale, a + step) <= n->lo[axis][s]) a += step;
-        for (uint32_t step = 128; step; step >>= 1)
-            if (b >= step && dequantise(lo, scale, b - step) >= n->hi[axis][s]) b -= step;
+        /* The step the division points to, then moved until its decoding is at or below the
+         * child's lower bound (at or above its upper one): the division's rounding and the
+         * decoding's are each a fraction of a step, so this takes a move or two. */
+        const double lo_steps = floor(((double)n->lo[axis][s] - lo) / scale);
+        const double hi_steps = ceil(((double)n->hi[axis][s] - lo) / scale);
+        uint32_t a = lo_steps <= 0.0 ? 0 : lo_steps >= 255.0 ? 255 : (uint32_t)lo_steps;
+        uint32_t b = hi_steps <= 0.0 ? 0 : hi_steps >= 255.0 ? 255 : (uint32_t)hi_steps;
+        while (a > 0 && dequantise(lo, scale, a) > n->lo[axis][s]) a--;
+        while (a < 255 && dequantise(lo, scale, a + 1) <= n->lo[axis][s]) a++;
+        while (b < 255 && dequantise(lo, scale, b) < n->hi[axis][s]) b++;
+        while (b > 0 && dequantise(lo, scale, b - 1) >= n->hi[axis][s]) b--;
         q_lo[s] = a;
         q_hi[s] = b;
     }
