@@ -109,6 +109,15 @@ uint wide_ray_index(uint k)
     return (gl_WorkGroupID.x * WIDE_RAYS + k) * VKRT_TRACE_GROUP_SIZE + gl_LocalInvocationIndex;
 }
 
+/* Pushes the child of the slot in sort key `key` (visit_wide_node) with its entry distance. A
+ * macro, not a function: GLSL passes arrays by copy. */
+#define WIDE_PUSH_SLOT(key)                                     \
+    if (sp < VKRT_TRAVERSAL_STACK_SIZE) {                       \
+        stack_ref[sp] = children[(key) & 3u];                   \
+        stack_tnear[sp] = key_float((key) & ~3u);               \
+        sp++;                                                   \
+    }
+
 /* The closest (or, ANYHIT, any) hit of r, as trace_bvh finds it; with WIDE_RAYS > 1 the hits of
  * this invocation's rays from its k-th on (r is that one, `valid` whether it may hit anything),
  * each stored by store_wide_hit as it ends. Returns false where the budget stopped it (the
@@ -212,35 +221,21 @@ bool trace_wide(ray r, bool valid, uint slot, uint k, inout hit best)
             /* The farther children on the stack, farthest first; the nearest to a free stage,
              * or on top of them. Never full: the host keeps the wide BVH within a third of the
              * stack's levels. */
-            if (entered > 3u && sp < VKRT_TRAVERSAL_STACK_SIZE) {
-                stack_ref[sp] = children[keys.w & 3u];
-                stack_tnear[sp] = key_float(keys.w & ~3u);
-                sp++;
-            }
-            if (entered > 2u && sp < VKRT_TRAVERSAL_STACK_SIZE) {
-                stack_ref[sp] = children[keys.z & 3u];
-                stack_tnear[sp] = key_float(keys.z & ~3u);
-                sp++;
-            }
-            if (entered > 1u && sp < VKRT_TRAVERSAL_STACK_SIZE) {
-                stack_ref[sp] = children[keys.y & 3u];
-                stack_tnear[sp] = key_float(keys.y & ~3u);
-                sp++;
-            }
+            if (entered > 3u) WIDE_PUSH_SLOT(keys.w);
+            if (entered > 2u) WIDE_PUSH_SLOT(keys.z);
+            if (entered > 1u) WIDE_PUSH_SLOT(keys.y);
             uint nearest = children[keys.x & 3u];
-            bool leaf = (nearest & VKRT_WIDE_LEAF) != 0u;
-            if (entered == 0u) {
-            } else if (!leaf) {
-                node = nearest;
-            } else if (tri == NO_TRI) {
-                tri = nearest & ~VKRT_WIDE_LEAF;
-            } else if (held == NO_NODE) {
-                held = nearest;
-                held_tnear = key_float(keys.x & ~3u);
-            } else if (sp < VKRT_TRAVERSAL_STACK_SIZE) {
-                stack_ref[sp] = nearest;
-                stack_tnear[sp] = key_float(keys.x & ~3u);
-                sp++;
+            if (entered > 0u) {
+                if ((nearest & VKRT_WIDE_LEAF) == 0u) {
+                    node = nearest;
+                } else if (tri == NO_TRI) {
+                    tri = nearest & ~VKRT_WIDE_LEAF;
+                } else if (held == NO_NODE) {
+                    held = nearest;
+                    held_tnear = key_float(keys.x & ~3u);
+                } else {
+                    WIDE_PUSH_SLOT(keys.x);
+                }
             }
         }
     }

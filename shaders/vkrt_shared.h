@@ -315,7 +315,9 @@ VKRT_STRUCT(vkrt_gpu_resume) {
     float v;               /* offset 28 */
     VKRT_UINT tri;         /* offset 32; triangle array index of the hit */
     VKRT_UINT prim;        /* offset 36; its prim_id, 0xFFFFFFFF: none */
-    VKRT_UINT heat_nodes;  /* offset 40; heat counters so far */
+    VKRT_UINT heat_nodes;  /* offset 40; heat counters so far (the wide traversal, which counts
+                              nothing: its held leaf, and that leaf's entry distance's bits in
+                              heat_leaves; tri_end: the invocation's ray in progress) */
     VKRT_UINT heat_leaves; /* offset 44 */
     VKRT_UINT heat_tris;   /* offset 48 */
     VKRT_UINT pad0;        /* offset 52; to 64 bytes, one cache line */

@@ -122,7 +122,6 @@ static vkrt_result upload_wide(vk_context *vk, const bvh *b, const vkrt_gpu_tri 
         r = vk_texel_buffer_create(vk, w.vertex_texels, usable ? w.vertex_count : 0, "vkrt triangle corners",
                                    &out->trace_verts);
     out->wide = r == VKRT_OK && usable;
-    out->wide_node_count = out->wide ? w.node_count : 0;
     wide_arrays_destroy(vk->core, &w);
     return r;
 }
@@ -454,6 +453,13 @@ static vkrt_result create_render_objects(vk_context *vk, const gpu_scene *scene,
         if (res != VK_SUCCESS) r = vk_fail(vk, res, "vkCreateQueryPool");
     }
     return r;
+}
+
+/* Whether a scene's traversals go through the wide BVH (all but naive ones; renders with heat
+ * or counters keep to the binary BVH as well, whose steps those count). */
+static bool wide_traversal(const gpu_scene *scene, bool naive)
+{
+    return scene->wide && !naive;
 }
 
 static uint32_t gpu_mode(vkrt_mode m)
@@ -797,7 +803,7 @@ vkrt_result gpu_trace_render(vk_context *vk, const gpu_scene *scene, const gpu_t
     /* Only heatmap reads the heat kind: other modes share one pipeline whatever it is. */
     if (variant.mode != VKRT_GPU_MODE_HEATMAP) variant.heat = VKRT_GPU_HEAT_NODES;
     /* Heat and counters are the binary BVH's steps, which the CPU counts too. */
-    variant.wide = scene->wide && !naive && !variant.counters && variant.mode != VKRT_GPU_MODE_HEATMAP;
+    variant.wide = wide_traversal(scene, naive) && !variant.counters && variant.mode != VKRT_GPU_MODE_HEATMAP;
     vk_trace_pipeline pipe;
     vkrt_result r = vk_trace_pipeline_get(vk, variant, &pipe);
     if (r != VKRT_OK) return r;
@@ -862,12 +868,6 @@ vkrt_result gpu_trace_render(vk_context *vk, const gpu_scene *scene, const gpu_t
     if (r == VKRT_OK && params->progress) params->progress(params->progress_user, "trace", 1.0f);
     render_objects_destroy(vk, &o);
     return r;
-}
-
-/* Whether ray variants trace the wide BVH (every ray variant of the scene does, but naive). */
-static bool wide_traversal(const gpu_scene *scene, bool naive)
-{
-    return scene->wide && !naive;
 }
 
 /* Records one pass over a chunk of rays (its first, a resume, or the next naive chunks):

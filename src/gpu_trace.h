@@ -36,7 +36,6 @@ typedef struct gpu_scene {
     vk_texel_buffer wide_nodes; /* its nodes and */
     vk_texel_buffer trace_tris; /* triangles and */
     vk_texel_buffer trace_verts; /* their corners (one-texel placeholders without them) */
-    uint32_t wide_node_count;
     double wide_pack_ms;       /* the host's collapse and packing of those arrays */
     uint32_t node_count;
     uint32_t tri_count;
