@@ -16,6 +16,9 @@ typedef struct core {
     vkrt_allocator allocator;      /* patched: both functions set */
     vkrt_log_fn log;               /* may be NULL */
     void *log_user;
+    /* Tests: a work pool starts at most this many threads in all, the caller included, as if
+     * the others had failed to start (0, the default: no limit). */
+    uint32_t test_thread_cap;
     char last_error[CORE_ERROR_SIZE];
 } core;
 

@@ -6,13 +6,13 @@
 #include "cpu_trace.h"
 
 #include <math.h>
-#include <pthread.h>
 #include <stdatomic.h>
 #include <stdbool.h>
 
 #include "cpu_integrate.h"
 #include "scene_pack.h"
 #include "texture.h"
+#include "work_pool.h"
 
 /* Square tiles of this side are the unit of work a thread claims: small enough that threads
  * finish together and that a cancel is seen soon, large enough that the shared counter is
@@ -248,10 +248,11 @@ typedef bool (*job_item_fn)(job *j, size_t item);
 
 struct job {
     job_item_fn run_item;
-    size_t items;
-    atomic_size_t next_item;
-    atomic_size_t done_items;
-    atomic_bool cancel;
+    uint32_t items;
+    atomic_uint done_items;
+    work_pool *pool;
+    vkrt_progress_fn progress;
+    void *progress_user;
     const cpu_trace_scene *scene;
     /* render */
     const cpu_trace_params *params;
@@ -343,7 +344,7 @@ static bool run_tile(job *j, size_t t)
 #endif
     for (uint32_t y = y0; y < y1; y++) {
         /* Checked per row so a cancel stops a slow (naive, large) tile early. */
-        if (atomic_load_explicit(&j->cancel, memory_order_relaxed)) return false;
+        if (work_pool_cancelled(j->pool)) return false;
         uint32_t x = x0;
 #if defined(__SSE2__)
         for (; packets && x + PACKET4_LANES <= x1; x += PACKET4_LANES)
@@ -419,7 +420,7 @@ static bool run_ray_block(job *j, size_t block)
     for (size_t i = first, check = first; i < end;) {
         /* Checked every 64 rays so a cancel stops a slow (naive) block early. */
         if (i >= check) {
-            if (atomic_load_explicit(&j->cancel, memory_order_relaxed)) return false;
+            if (work_pool_cancelled(j->pool)) return false;
             check = i + 64;
         }
 #if defined(__SSE2__)
@@ -434,62 +435,37 @@ static bool run_ray_block(job *j, size_t block)
     return true;
 }
 
-/* Claims and traces one item; false when none is left or the job was cancelled. */
-static bool run_one_item(job *j)
-{
-    if (atomic_load_explicit(&j->cancel, memory_order_relaxed)) return false;
-    size_t t = atomic_fetch_add_explicit(&j->next_item, 1, memory_order_relaxed);
-    if (t >= j->items) return false;
-    if (!j->run_item(j, t)) return false;
-    atomic_fetch_add_explicit(&j->done_items, 1, memory_order_relaxed);
-    return true;
-}
-
-static void *worker_main(void *arg)
+/* Traces item `item` of the job (work_pool's item function). */
+static void run_pool_item(void *arg, uint32_t item)
 {
     job *j = arg;
-    while (run_one_item(j)) {
-    }
-    return NULL;
+    if (j->run_item(j, item)) atomic_fetch_add_explicit(&j->done_items, 1, memory_order_relaxed);
 }
 
-/* Runs j->items items on `threads` threads, the caller one of them. */
+/* Between items, on the calling thread alone (work_pool's between hook), so the progress
+ * callback never runs on a worker: reports the fraction done; false cancels. */
+static bool report_progress(void *arg)
+{
+    job *j = arg;
+    float fraction = (float)atomic_load_explicit(&j->done_items, memory_order_relaxed) / (float)j->items;
+    return j->progress(j->progress_user, "trace", fraction);
+}
+
+/* Runs j->items items on `threads` threads (the builder's work pool), the caller one of them. */
 static vkrt_result run_job(core *c, job *j, uint32_t threads, vkrt_progress_fn progress, void *progress_user)
 {
-    atomic_init(&j->next_item, 0);
     atomic_init(&j->done_items, 0);
-    atomic_init(&j->cancel, false);
-    uint32_t helpers = threads > 1 ? threads - 1 : 0;
-    if (helpers > j->items) helpers = (uint32_t)j->items;
-    pthread_t *workers = NULL;
-    if (helpers) {
-        workers = core_alloc_array(c, helpers, sizeof *workers);
-        if (!workers) return core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "out of memory for %u trace threads", helpers);
-    }
-    uint32_t started = 0;
-    vkrt_result r = VKRT_OK;
-    for (; started < helpers; started++) {
-        if (pthread_create(&workers[started], NULL, worker_main, j) != 0) {
-            atomic_store(&j->cancel, true);
-            r = core_fail(c, VKRT_ERROR_LIMIT, "could not start trace thread %u of %u", started + 1, helpers);
-            break;
-        }
-    }
-    /* The calling thread traces too, and between its items it alone reports progress, so the
-     * callback never runs on a worker. */
-    while (r == VKRT_OK && run_one_item(j)) {
-        if (progress) {
-            float fraction = (float)atomic_load_explicit(&j->done_items, memory_order_relaxed) / (float)j->items;
-            if (!progress(progress_user, "trace", fraction)) {
-                atomic_store(&j->cancel, true);
-                r = core_fail(c, VKRT_ERROR_CANCELLED, "trace cancelled by the progress callback");
-            }
-        }
-    }
-    for (uint32_t i = 0; i < started; i++) pthread_join(workers[i], NULL);
-    core_free(c, workers);
-    if (r == VKRT_OK && progress) progress(progress_user, "trace", 1.0f);
-    return r;
+    j->progress = progress;
+    j->progress_user = progress_user;
+    /* No more threads than items: the others would start only to find nothing left. */
+    vkrt_result r = work_pool_create(c, threads < j->items ? threads : j->items, &j->pool);
+    if (r != VKRT_OK) return r;
+    const bool finished = work_pool_run(j->pool, j->items, run_pool_item, progress ? report_progress : NULL, j);
+    work_pool_destroy(j->pool);
+    j->pool = NULL;
+    if (!finished) return core_fail(c, VKRT_ERROR_CANCELLED, "trace cancelled by the progress callback");
+    if (progress) progress(progress_user, "trace", 1.0f);
+    return VKRT_OK;
 }
 
 vkrt_result cpu_trace_render(core *c, const cpu_trace_scene *scene, const cpu_trace_params *params, float *out_rgba,
@@ -508,7 +484,8 @@ vkrt_result cpu_trace_render(core *c, const cpu_trace_scene *scene, const cpu_tr
         .out = out_rgba,
     };
     j.tiles_x = (width + TILE - 1) / TILE;
-    j.items = (size_t)j.tiles_x * ((height + TILE - 1) / TILE);
+    /* The API keeps width and height within 65,536 (MAX_IMAGE_SIZE), so the tiles fit 32 bits. */
+    j.items = j.tiles_x * ((height + TILE - 1) / TILE);
     atomic_init(&j.count_nodes, 0);
     atomic_init(&j.count_leaves, 0);
     atomic_init(&j.count_tris, 0);
@@ -525,9 +502,13 @@ vkrt_result cpu_trace_render(core *c, const cpu_trace_scene *scene, const cpu_tr
 vkrt_result cpu_trace_rays(core *c, const cpu_trace_scene *scene, const cpu_trace_rays_params *params,
                            const vkrt_ray *rays, size_t count, vkrt_hit *out_hits)
 {
+    const size_t blocks = (count + RAY_BLOCK - 1) / RAY_BLOCK;
+    if (blocks > UINT32_MAX)
+        return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "%zu rays exceed the %llu one call can trace", count,
+                         (unsigned long long)UINT32_MAX * RAY_BLOCK);
     job j = {
         .run_item = run_ray_block,
-        .items = (count + RAY_BLOCK - 1) / RAY_BLOCK,
+        .items = (uint32_t)blocks,
         .scene = scene,
         .rays_params = params,
         .rays = rays,

@@ -91,7 +91,9 @@ vkrt_result work_pool_create(core *c, uint32_t threads, work_pool **out)
             }
             if (!synced) pthread_mutex_destroy(&p->lock);
         }
-        while (synced && p->workers_started < helpers &&
+        /* The test cap stops the loop where a failing pthread_create would. */
+        const uint32_t startable = c->test_thread_cap && c->test_thread_cap - 1 < helpers ? c->test_thread_cap - 1 : helpers;
+        while (synced && p->workers_started < startable &&
                pthread_create(&p->workers[p->workers_started], NULL, worker_main, p) == 0)
             p->workers_started++;
         if (p->workers_started < helpers)

@@ -826,6 +826,51 @@ static void bvh_sah_is_identical_on_any_thread_count(void)
     mesh_destroy(&c, &dragon);
 }
 
+typedef struct warn_log {
+    int warnings;
+    bool named_threads;
+} warn_log;
+
+static void on_log(void *user, vkrt_log_level level, const char *message)
+{
+    warn_log *l = user;
+    if (level != VKRT_LOG_WARN) return;
+    l->warnings++;
+    if (strstr(message, "worker threads")) l->named_threads = true;
+}
+
+/* Where worker threads fail to start (the test cap stops them where pthread_create would) the
+ * pool runs with those that did, down to the caller alone: the same tree, and a warning. */
+static void bvh_sah_builds_the_same_tree_when_threads_fail_to_start(void)
+{
+    warn_log l = { 0 };
+    core c;
+    core_init(&c, NULL, on_log, &l);
+    mesh m = make_random(&c, PARALLEL_TEST_TRIS);
+    bvh one;
+    bvh_stats s;
+    if (build_checked(&c, "1 thread", &m, VKRT_BVH_BUILDER_BINNED_SAH, 0, 1, &one, &s) == VKRT_OK) {
+        CHECK_EQ_U64(l.warnings, 0);
+        const uint32_t caps[] = { 1, 2 };
+        for (size_t i = 0; i < sizeof caps / sizeof caps[0]; i++) {
+            char what[64];
+            snprintf(what, sizeof what, "8 threads, %u started", caps[i]);
+            c.test_thread_cap = caps[i];
+            l = (warn_log){ 0 };
+            bvh capped;
+            bvh_stats cs;
+            if (build_checked(&c, what, &m, VKRT_BVH_BUILDER_BINNED_SAH, 0, 8, &capped, &cs) == VKRT_OK) {
+                check_same_bvh(what, &one, &capped);
+                bvh_destroy(&c, &capped);
+            }
+            CHECK_MSG(l.warnings >= 1 && l.named_threads, "%s: no warning about the threads that did not start", what);
+        }
+        c.test_thread_cap = 0;
+        bvh_destroy(&c, &one);
+    }
+    test_mesh_free(&c, &m);
+}
+
 static void bvh_sah_parallel_out_of_memory_and_cancel_without_leak(void)
 {
     counting k = { 0 };
@@ -991,6 +1036,7 @@ int main(void)
     RUN(bvh_out_of_memory_at_every_allocation_without_leak);
     RUN(bvh_sah_is_identical_on_any_thread_count);
     RUN(bvh_sah_parallel_out_of_memory_and_cancel_without_leak);
+    RUN(bvh_sah_builds_the_same_tree_when_threads_fail_to_start);
     RUN(bvh4_collapse_fails_cleanly);
     RUN(bvh_validate_reports_broken_trees);
     RUN(bvh_shared_models_are_valid_and_sah_is_cheaper);

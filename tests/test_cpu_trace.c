@@ -718,6 +718,43 @@ static void thread_counts_give_identical_images(void)
     mesh_free_local(&m);
 }
 
+static void count_warning(void *user, vkrt_log_level level, const char *message)
+{
+    (void)message;
+    if (level == VKRT_LOG_WARN) ++*(int *)user;
+}
+
+/* Worker threads that fail to start (the test cap stops them where pthread_create would)
+ * leave the image to the threads that did, down to the caller alone: the same pixels, and a
+ * warning through the log. */
+static void thread_start_failure_gives_the_same_image(void)
+{
+    mesh m = make_sphere_scene(20, 28);
+    scene s;
+    if (scene_make(&m, BUILD_SAH, &s)) {
+        render_opts o = { .mode = VKRT_MODE_NORMAL, .width = 70, .height = 45, .threads = 1 };
+        float *one = render(&s, o);
+        int warnings = 0;
+        c.log = count_warning;
+        c.log_user = &warnings;
+        for (uint32_t cap = 1; cap <= 2; cap++) {
+            c.test_thread_cap = cap;
+            warnings = 0;
+            o.threads = 4;
+            float *capped = render(&s, o);
+            CHECK_MSG(memcmp(one, capped, bytes(o)) == 0, "%u of 4 threads started: the image differs", cap);
+            CHECK_MSG(warnings == 1, "%u of 4 threads started: %d warnings, not 1", cap, warnings);
+            free(capped);
+        }
+        c.test_thread_cap = 0;
+        c.log = NULL;
+        c.log_user = NULL;
+        free(one);
+        scene_free(&s);
+    }
+    mesh_free_local(&m);
+}
+
 typedef struct progress_log {
     pthread_t caller;
     atomic_int calls;
@@ -1259,6 +1296,7 @@ int main(void)
     RUN(midpoint_and_sah_give_identical_images_in_every_mode);
     RUN(heatmap_counts_are_consistent);
     RUN(thread_counts_give_identical_images);
+    RUN(thread_start_failure_gives_the_same_image);
     RUN(progress_runs_on_the_caller_and_cancel_returns_cancelled);
     RUN(cpu_trace_rays_follow_the_documented_rules);
     RUN(cpu_float_watertight_never_misses_shared_edges_and_vertices);
