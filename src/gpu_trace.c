@@ -462,6 +462,20 @@ static bool wide_traversal(const gpu_scene *scene, bool naive)
     return scene->wide && !naive;
 }
 
+static uint32_t div_up(uint32_t a, uint32_t b)
+{
+    return (a + b - 1) / b;
+}
+
+/* The continuation slots a budgeted pass over `rays` rays of a ray buffer needs: one a ray,
+ * or, where the wide traversal traces VKRT_WIDE_RAYS_PER_LANE rays in each invocation, one an
+ * invocation of the dispatch (trace_buffer_rays_wide's slot), an eighth of the memory. */
+static uint32_t ray_resume_slots(const gpu_scene *scene, bool naive, uint32_t rays)
+{
+    if (!wide_traversal(scene, naive)) return rays;
+    return div_up(rays, VKRT_TRACE_GROUP_SIZE * VKRT_WIDE_RAYS_PER_LANE) * VKRT_TRACE_GROUP_SIZE;
+}
+
 static uint32_t gpu_mode(vkrt_mode m)
 {
     switch (m) {
@@ -486,11 +500,6 @@ static uint32_t gpu_heat(vkrt_heat h)
 static uint32_t gpu_isect(vkrt_intersector i)
 {
     return i == VKRT_INTERSECTOR_MOLLER_TRUMBORE ? VKRT_GPU_ISECT_MOLLER_TRUMBORE : VKRT_GPU_ISECT_WATERTIGHT;
-}
-
-static uint32_t div_up(uint32_t a, uint32_t b)
-{
-    return (a + b - 1) / b;
 }
 
 /* One buffer barrier over the whole buffer. */
@@ -941,7 +950,8 @@ vkrt_result gpu_trace_rays(vk_context *vk, const gpu_scene *scene, const gpu_tra
     const uint32_t max_chunk = budget ? VKRT_RESUME_RAY_CHUNK : VKRT_RAY_CHUNK;
     const uint32_t capacity = count < max_chunk ? (uint32_t)count : max_chunk;
     render_objects o;
-    r = create_render_objects(vk, scene, pipe.set_layout, 1, 1, capacity, capacity, budget ? capacity : 0, 0, &o);
+    r = create_render_objects(vk, scene, pipe.set_layout, 1, 1, capacity, capacity,
+                              budget ? ray_resume_slots(scene, naive, capacity) : 0, 0, &o);
     gpu_pacer pacer;
     pacer_for(vk, scene, naive, capacity, &pacer);
     const uint32_t chunks = naive ? naive_chunks(scene) : 1;
@@ -997,7 +1007,8 @@ vkrt_result gpu_wavefront_tracer_init(vk_context *vk, gpu_wavefront_tracer *t, c
     t->first = true;
     t->capacity = capacity;
     if (r == VKRT_OK)
-        r = create_render_objects(vk, scene, t->pipe.set_layout, 1, 1, capacity, capacity, t->budget ? capacity : 0, 0,
+        r = create_render_objects(vk, scene, t->pipe.set_layout, 1, 1, capacity, capacity,
+                                  t->budget ? ray_resume_slots(scene, naive, capacity) : 0, 0,
                                   &t->o);
     return r;
 }
