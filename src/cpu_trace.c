@@ -119,14 +119,10 @@ unsigned cpu_trace_box4_test(const vkrt_gpu_ray *ray, const bvh4_node *n, float 
                              float out_tnear[BVH4_WIDTH])
 {
     ray_f r = ray_setup_f(v_load_f(ray->origin), v_load_f(ray->dir), ray->tmin, INFINITY);
-#if defined(__SSE2__)
     if (simd) {
         box4_ray b = box4_ray_setup(&r);
-        return box4_test_sse2(&b, n, best_t, out_tnear);
+        return box4_test(&b, n, best_t, out_tnear);
     }
-#else
-    (void)simd;
-#endif
     return box4_test_scalar(&r, n, best_t, out_tnear);
 }
 
@@ -134,24 +130,11 @@ unsigned cpu_trace_watertight4_test(const vkrt_gpu_ray *ray, const vkrt_gpu_tri 
                                     float out_t[4], float out_u[4], float out_v[4])
 {
     ray_f r = ray_setup_f(v_load_f(ray->origin), v_load_f(ray->dir), ray->tmin, ray->tmax);
-#if defined(__SSE2__)
-    if (simd) return watertight4_sse2(&r, tris, out_t, out_u, out_v);
-#else
-    (void)simd;
-#endif
+    if (simd) return watertight4(&r, tris, out_t, out_u, out_v);
     unsigned mask = 0;
     for (unsigned l = 0; l < 4; l++)
         if (intersect_triangle_watertight_f(&r, tris[l], &out_t[l], &out_u[l], &out_v[l])) mask |= 1u << l;
     return mask;
-}
-
-bool cpu_trace_simd4_available(void)
-{
-#if defined(__SSE2__)
-    return true;
-#else
-    return false;
-#endif
 }
 
 vkrt_gpu_ray cpu_trace_camera_ray(const vkrt_gpu_push *camera, uint32_t x, uint32_t y)
@@ -308,7 +291,6 @@ static void trace_pixel(const job *j, uint32_t x, uint32_t y, float out[4], trac
     counts->tris += heat.tris;
 }
 
-#if defined(__SSE2__)
 /* Whether a tile's rows go four pixels to a packet: float rays through the 4-wide BVH, which
  * no counter watches (a camera's neighbouring pixels are always coherent). */
 static bool pixel_packets(const job *j)
@@ -331,7 +313,6 @@ static void trace_pixels4(const job *j, uint32_t x, uint32_t y, float *out)
         shade(j->scene, j->params, &best, &(heat_counts){ 0 }, out + 4 * l);
     }
 }
-#endif
 
 static bool run_tile(job *j, size_t t)
 {
@@ -339,17 +320,13 @@ static bool run_tile(job *j, size_t t)
     uint32_t x0 = (uint32_t)(t % j->tiles_x) * TILE, y0 = (uint32_t)(t / j->tiles_x) * TILE;
     uint32_t x1 = x0 + TILE < width ? x0 + TILE : width, y1 = y0 + TILE < height ? y0 + TILE : height;
     trace_counts counts = { 0 };
-#if defined(__SSE2__)
     const bool packets = pixel_packets(j);
-#endif
     for (uint32_t y = y0; y < y1; y++) {
         /* Checked per row so a cancel stops a slow (naive, large) tile early. */
         if (work_pool_cancelled(j->pool)) return false;
         uint32_t x = x0;
-#if defined(__SSE2__)
         for (; packets && x + PACKET4_LANES <= x1; x += PACKET4_LANES)
             trace_pixels4(j, x, y, j->out + ((size_t)y * width + x) * 4);
-#endif
         for (; x < x1; x++) trace_pixel(j, x, y, j->out + ((size_t)y * width + x) * 4, &counts);
     }
     if (j->params->counters) {
@@ -390,7 +367,6 @@ static vkrt_hit trace_one_ray(const job *j, const vkrt_ray *in)
     return public_hit_f(j->scene, &r, trace_float(j->scene, p->traversal, p->intersector, &r, &heat, p->any_hit, false));
 }
 
-#if defined(__SSE2__)
 /* Rays [i, i + 4) as one packet where they are valid and coherent (cpu_trace_packet4.h);
  * false, with nothing written, where they are not. */
 static bool trace_packet(const job *j, size_t i)
@@ -408,27 +384,22 @@ static bool trace_packet(const job *j, size_t i)
     }
     return true;
 }
-#endif
 
 static bool run_ray_block(job *j, size_t block)
 {
     size_t first = block * RAY_BLOCK, end = first + RAY_BLOCK < j->ray_count ? first + RAY_BLOCK : j->ray_count;
-#if defined(__SSE2__)
     const cpu_trace_rays_params *p = j->rays_params;
     const bool packets = j->scene->wide && p->traversal == VKRT_TRAVERSAL_BVH && p->precision != VKRT_PRECISION_DOUBLE;
-#endif
     for (size_t i = first, check = first; i < end;) {
         /* Checked every 64 rays so a cancel stops a slow (naive) block early. */
         if (i >= check) {
             if (work_pool_cancelled(j->pool)) return false;
             check = i + 64;
         }
-#if defined(__SSE2__)
         if (packets && i + PACKET4_LANES <= end && trace_packet(j, i)) {
             i += PACKET4_LANES;
             continue;
         }
-#endif
         j->hits[i] = trace_one_ray(j, &j->rays[i]);
         i++;
     }

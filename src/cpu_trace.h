@@ -80,19 +80,16 @@ bool cpu_trace_one(const cpu_trace_scene *s, vkrt_traversal traversal, vkrt_inte
 /* The four-box test of the 4-wide traversal on node n's slots, for the tests that hold it to
  * the binary one: the float ray made from ray's origin, dir and tmin as every traversal makes
  * it (no checks: zero, denormal and infinite components pass), tested against best_t. simd:
- * the SSE2 test the traversal uses where the compiler targets SSE2; false: the portable one
- * (intersect_box_f per slot). Returns the mask of hit slots (bit i: slot i) and writes each
+ * the four-lane test the traversal uses (float4.h: SSE2, or its plain-C twin); false:
+ * intersect_box_f per slot. Returns the mask of hit slots (bit i: slot i) and writes each
  * used slot's entry distance to out_tnear[i]. */
 unsigned cpu_trace_box4_test(const vkrt_gpu_ray *ray, const bvh4_node *n, float best_t, bool simd,
                              float out_tnear[BVH4_WIDTH]);
 /* The watertight test of the 4-wide traversal's leaves on four triangles, for the tests that
  * hold it to the scalar one: the float ray made from ray (tmin, tmax as given; no checks).
- * simd: the SSE2 test of four at once; false: intersect_triangle_watertight_f per triangle.
+ * simd: the four-lane test (float4.h); false: intersect_triangle_watertight_f per triangle.
  * Returns the mask of hit triangles and writes each hit's t, u, v. */
 unsigned cpu_trace_watertight4_test(const vkrt_gpu_ray *ray, const vkrt_gpu_tri *const tris[4], bool simd,
                                     float out_t[4], float out_u[4], float out_v[4]);
-/* Whether cpu_trace_box4_test and cpu_trace_watertight4_test run SSE2 code with simd (else
- * they are the portable tests). */
-bool cpu_trace_simd4_available(void);
 
 #endif

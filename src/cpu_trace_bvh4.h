@@ -3,11 +3,11 @@
  * cpu_trace_real.h, whose ray_f, hit_f, intersect_box_f and test_triangle_f it uses.
  *
  * Same answers as trace_bvh_f: each of a node's four child boxes is tested with
- * intersect_box_f's arithmetic and a leaf's triangles with test_triangle_f's (SSE2 does four
- * boxes or four watertight triangle tests at once, operation for operation, so the results
- * are the same bits: cpu_trace_simd4.h; without SSE2 the scalar tests themselves run), and the
- * closest hit is chosen by hit_closer (nearer t, then lower prim_id), which does not depend on
- * the order boxes are visited. An any-hit ray
+ * intersect_box_f's arithmetic and a leaf's triangles with test_triangle_f's (four boxes or
+ * four watertight triangle tests at once through float4.h, operation for operation, so the
+ * results are the same bits: cpu_trace_simd4.h), and the closest hit is chosen by hit_closer
+ * (nearer t, then lower prim_id), which does not depend on the order boxes are visited. An
+ * any-hit ray
  * may stop at another triangle than the binary traversal's (the first found differs with the
  * order), never with another hit-or-miss answer. The binary traversal's counters (boxes,
  * leaves, triangles) have no equivalent here: whoever needs them (heat map, render counters)
@@ -35,7 +35,6 @@ typedef struct bvh4_item {
 static inline bool test_leaf_f(vkrt_intersector isect, const ray_f *r, const cpu_trace_scene *s, uint32_t first,
                                uint32_t count, hit_f *best, bool any_hit)
 {
-#if defined(__SSE2__)
     if (isect != VKRT_INTERSECTOR_MOLLER_TRUMBORE && count > 1) {
         for (uint32_t at = first, end = first + count; at < end; at += 4) {
             const uint32_t n = end - at < 4 ? end - at : 4;
@@ -43,7 +42,7 @@ static inline bool test_leaf_f(vkrt_intersector isect, const ray_f *r, const cpu
             const vkrt_gpu_tri *const tris[4] = { &s->tris[at], &s->tris[at + (n > 1)], &s->tris[at + (n > 2 ? 2 : n - 1)],
                                                   &s->tris[at + n - 1] };
             float t[4], u[4], v[4];
-            unsigned hits = watertight4_sse2(r, tris, t, u, v) & ((1u << n) - 1u);
+            unsigned hits = watertight4(r, tris, t, u, v) & ((1u << n) - 1u);
             for (; hits; hits &= hits - 1) {
                 unsigned l = lowest_slot(hits);
                 uint32_t prim = tris[l]->prim_id;
@@ -55,7 +54,6 @@ static inline bool test_leaf_f(vkrt_intersector isect, const ray_f *r, const cpu
         }
         return false;
     }
-#endif
     for (uint32_t i = first; i < first + count; i++) {
         test_triangle_f(isect, r, s, i, best);
         if (any_hit && best->prim != NO_PRIM) return true;
@@ -70,11 +68,12 @@ static inline bool test_leaf_f(vkrt_intersector isect, const ray_f *r, const cpu
  * of a helper it has not inlined (it takes the helper for one without effects). */
 BVH4_INLINE void prefetch_children(const cpu_trace_scene *s, const bvh4_node *n)
 {
-#if defined(__SSE2__)
+#if defined(__GNUC__)
     for (unsigned k = 0; k < BVH4_WIDTH && n->child[k] != BVH4_EMPTY; k++) {
         const char *p = n->count[k] ? (const char *)&s->tris[n->child[k]] : (const char *)&s->wide->nodes[n->child[k]];
-        _mm_prefetch(p, _MM_HINT_T0);
-        _mm_prefetch(p + 64, _MM_HINT_T0);
+        /* Read, kept in every cache level (PREFETCHT0 on x86). */
+        __builtin_prefetch(p, 0, 3);
+        __builtin_prefetch(p + 64, 0, 3);
     }
 #else
     (void)s, (void)n;
@@ -90,9 +89,7 @@ static void trace_bvh4_f(const cpu_trace_scene *s, vkrt_intersector isect, const
     float root_tnear;
     /* The binary traversal's first test, so a ray that misses the scene costs one box. */
     if (!intersect_box_f(r, &root, best->t, &root_tnear)) return;
-#if defined(__SSE2__)
     const box4_ray b = box4_ray_setup(r);
-#endif
     bvh4_item stack[BVH4_STACK_SIZE];
     uint32_t sp = 0;
     bvh4_item item = { 0, 0, root_tnear };
@@ -103,11 +100,7 @@ static void trace_bvh4_f(const cpu_trace_scene *s, vkrt_intersector isect, const
             const bvh4_node *n = &w->nodes[item.first];
             prefetch_children(s, n);
             float tnear[BVH4_WIDTH];
-#if defined(__SSE2__)
-            unsigned mask = box4_test_sse2(&b, n, best->t, tnear);
-#else
-            unsigned mask = box4_test_scalar(r, n, best->t, tnear);
-#endif
+            unsigned mask = box4_test(&b, n, best->t, tnear);
             if (mask) {
                 /* The hit slots in order of entry distance (a stable insertion sort; one and two
                  * hits, the common cases, take the short ways): the nearest is visited next, the

@@ -1,8 +1,7 @@
-/* Four coherent float rays through the 4-wide BVH together (a packet, one ray per SSE lane):
- * each child box is tested against the four rays at once, so rays that enter the same nodes
- * (primary rays of neighbouring pixels) share one fetch, one sort and one stack entry per
- * node. Included by src/cpu_trace.c after cpu_trace_bvh4.h; SSE2 only (without it every ray
- * goes through trace_ray_bvh4_f alone).
+/* Four coherent float rays through the 4-wide BVH together (a packet, one ray per float4
+ * lane): each child box is tested against the four rays at once, so rays that enter the same
+ * nodes (primary rays of neighbouring pixels) share one fetch, one sort and one stack entry
+ * per node. Included by src/cpu_trace.c after cpu_trace_bvh4.h.
  *
  * Same answers as the single-ray traversals: in lane l the box arithmetic is intersect_box_f's
  * for ray l, operation for operation (slab() included, its +-0 direction branch as a per-lane
@@ -15,8 +14,6 @@
  * Tracing", Eurographics 2001, here over a 4-wide tree: the hit children in order of the
  * nearest entry distance among their lanes. */
 
-#if defined(__SSE2__)
-
 #define PACKET4_LANES 4
 #define PACKET4_ALL 0xFu
 /* As BVH4_STACK_SIZE: at most BVH4_WIDTH - 1 entries pushed per level. */
@@ -25,14 +22,14 @@
 typedef struct packet4 {
     ray_f ray[PACKET4_LANES];   /* what the triangle tests read */
     hit_f best[PACKET4_LANES];  /* each lane's closest hit so far */
-    __m128 origin[3], inv_dir[3], tmin, best_t; /* per axis, lane l = ray l's; best_t: prune bounds */
-    __m128 parallel[3];         /* lanes whose inv_dir is infinite on the axis (slab()'s other branch) */
+    float4 origin[3], inv_dir[3], tmin, best_t; /* per axis, lane l = ray l's; best_t: prune bounds */
+    float4 parallel[3];         /* lanes whose inv_dir is infinite on the axis (slab()'s other branch) */
     bool any_parallel;
 } packet4;
 
 /* A subtree to visit for the lanes in mask, with each lane's entry distance. */
 typedef struct packet4_item {
-    __m128 tnear;
+    float4 tnear;
     uint32_t first, count;      /* as bvh4_item */
     unsigned mask;
 } packet4_item;
@@ -49,34 +46,31 @@ static void packet4_setup(packet4 *p)
         p->any_parallel |= f_abs_f(r[l].inv_dir.x) == INFINITY || f_abs_f(r[l].inv_dir.y) == INFINITY ||
                            f_abs_f(r[l].inv_dir.z) == INFINITY;
     }
-    p->origin[0] = _mm_setr_ps(r[0].origin.x, r[1].origin.x, r[2].origin.x, r[3].origin.x);
-    p->origin[1] = _mm_setr_ps(r[0].origin.y, r[1].origin.y, r[2].origin.y, r[3].origin.y);
-    p->origin[2] = _mm_setr_ps(r[0].origin.z, r[1].origin.z, r[2].origin.z, r[3].origin.z);
-    p->inv_dir[0] = _mm_setr_ps(r[0].inv_dir.x, r[1].inv_dir.x, r[2].inv_dir.x, r[3].inv_dir.x);
-    p->inv_dir[1] = _mm_setr_ps(r[0].inv_dir.y, r[1].inv_dir.y, r[2].inv_dir.y, r[3].inv_dir.y);
-    p->inv_dir[2] = _mm_setr_ps(r[0].inv_dir.z, r[1].inv_dir.z, r[2].inv_dir.z, r[3].inv_dir.z);
-    const __m128 inf = _mm_set1_ps(INFINITY), sign = _mm_set1_ps(-0.0f);
-    for (int a = 0; a < 3; a++) p->parallel[a] = _mm_cmpeq_ps(_mm_andnot_ps(sign, p->inv_dir[a]), inf);
-    p->tmin = _mm_setr_ps(r[0].tmin, r[1].tmin, r[2].tmin, r[3].tmin);
+    p->origin[0] = f4_set(r[0].origin.x, r[1].origin.x, r[2].origin.x, r[3].origin.x);
+    p->origin[1] = f4_set(r[0].origin.y, r[1].origin.y, r[2].origin.y, r[3].origin.y);
+    p->origin[2] = f4_set(r[0].origin.z, r[1].origin.z, r[2].origin.z, r[3].origin.z);
+    p->inv_dir[0] = f4_set(r[0].inv_dir.x, r[1].inv_dir.x, r[2].inv_dir.x, r[3].inv_dir.x);
+    p->inv_dir[1] = f4_set(r[0].inv_dir.y, r[1].inv_dir.y, r[2].inv_dir.y, r[3].inv_dir.y);
+    p->inv_dir[2] = f4_set(r[0].inv_dir.z, r[1].inv_dir.z, r[2].inv_dir.z, r[3].inv_dir.z);
+    for (int a = 0; a < 3; a++) p->parallel[a] = f4_eq(f4_abs(p->inv_dir[a]), f4_set1(INFINITY));
+    p->tmin = f4_set(r[0].tmin, r[1].tmin, r[2].tmin, r[3].tmin);
     /* Per lane the prune bound of the closest hit so far (prune_bound_f): what boxes and stack
      * entries are held to. */
-    p->best_t = _mm_setr_ps(prune_bound_f(r[0].tmax), prune_bound_f(r[1].tmax), prune_bound_f(r[2].tmax),
-                            prune_bound_f(r[3].tmax));
+    p->best_t = f4_set(prune_bound_f(r[0].tmax), prune_bound_f(r[1].tmax), prune_bound_f(r[2].tmax),
+                       prune_bound_f(r[3].tmax));
 }
 
 /* slab_f for the four lanes on one box plane pair (lo, hi broadcast). */
-BVH4_INLINE void packet4_slab(const packet4 *p, int a, __m128 lo, __m128 hi, __m128 *out_lo, __m128 *out_hi)
+BVH4_INLINE void packet4_slab(const packet4 *p, int a, float4 lo, float4 hi, float4 *out_lo, float4 *out_hi)
 {
-    __m128 t0 = _mm_mul_ps(_mm_sub_ps(lo, p->origin[a]), p->inv_dir[a]);
-    __m128 t1 = _mm_mul_ps(_mm_sub_ps(hi, p->origin[a]), p->inv_dir[a]);
-    __m128 l = _mm_min_ps(t1, t0), h = _mm_max_ps(t1, t0);
+    float4 t0 = f4_mul(f4_sub(lo, p->origin[a]), p->inv_dir[a]);
+    float4 t1 = f4_mul(f4_sub(hi, p->origin[a]), p->inv_dir[a]);
+    float4 l = f4_min(t1, t0), h = f4_max(t1, t0);
     if (p->any_parallel) {
-        const __m128 inf = _mm_set1_ps(INFINITY), minus_inf = _mm_set1_ps(-INFINITY), par = p->parallel[a];
-        __m128 inside = _mm_and_ps(_mm_cmpge_ps(p->origin[a], lo), _mm_cmple_ps(p->origin[a], hi));
-        __m128 par_lo = _mm_or_ps(_mm_and_ps(inside, minus_inf), _mm_andnot_ps(inside, inf));
-        __m128 par_hi = _mm_or_ps(_mm_and_ps(inside, inf), _mm_andnot_ps(inside, minus_inf));
-        l = _mm_or_ps(_mm_and_ps(par, par_lo), _mm_andnot_ps(par, l));
-        h = _mm_or_ps(_mm_and_ps(par, par_hi), _mm_andnot_ps(par, h));
+        const float4 inf = f4_set1(INFINITY), minus_inf = f4_set1(-INFINITY), par = p->parallel[a];
+        float4 inside = f4_and(f4_ge(p->origin[a], lo), f4_le(p->origin[a], hi));
+        l = f4_select(par, f4_select(inside, minus_inf, inf), l);
+        h = f4_select(par, f4_select(inside, inf, minus_inf), h);
     }
     *out_lo = l;
     *out_hi = h;
@@ -84,41 +78,33 @@ BVH4_INLINE void packet4_slab(const packet4 *p, int a, __m128 lo, __m128 hi, __m
 
 /* intersect_box_f of the box lo-hi for the four lanes: the lanes (within active) that enter
  * it, as a bit mask and as a lane mask in *out_hit, their entry distances in *out_tnear. */
-BVH4_INLINE unsigned packet4_box(const packet4 *p, const float lo[3], const float hi[3], __m128 active,
-                                 __m128 *out_tnear, __m128 *out_hit)
+BVH4_INLINE unsigned packet4_box(const packet4 *p, const float lo[3], const float hi[3], float4 active,
+                                 float4 *out_tnear, float4 *out_hit)
 {
-    __m128 lx, hx, ly, hy, lz, hz;
-    packet4_slab(p, 0, _mm_set1_ps(lo[0]), _mm_set1_ps(hi[0]), &lx, &hx);
-    packet4_slab(p, 1, _mm_set1_ps(lo[1]), _mm_set1_ps(hi[1]), &ly, &hy);
-    packet4_slab(p, 2, _mm_set1_ps(lo[2]), _mm_set1_ps(hi[2]), &lz, &hz);
-    __m128 near = _mm_max_ps(_mm_max_ps(p->tmin, lz), _mm_max_ps(ly, lx));
-    __m128 far = _mm_mul_ps(_mm_min_ps(hz, _mm_min_ps(hy, hx)), _mm_set1_ps((float)VKRT_TFAR_WIDEN_FLOAT));
-    far = _mm_min_ps(p->best_t, far);
+    float4 lx, hx, ly, hy, lz, hz;
+    packet4_slab(p, 0, f4_set1(lo[0]), f4_set1(hi[0]), &lx, &hx);
+    packet4_slab(p, 1, f4_set1(lo[1]), f4_set1(hi[1]), &ly, &hy);
+    packet4_slab(p, 2, f4_set1(lo[2]), f4_set1(hi[2]), &lz, &hz);
+    float4 near = f4_max(f4_max(p->tmin, lz), f4_max(ly, lx));
+    float4 far = f4_mul(f4_min(hz, f4_min(hy, hx)), f4_set1((float)VKRT_TFAR_WIDEN_FLOAT));
+    far = f4_min(p->best_t, far);
     *out_tnear = near;
-    *out_hit = _mm_and_ps(_mm_cmple_ps(near, far), active);
-    return (unsigned)_mm_movemask_ps(*out_hit);
+    *out_hit = f4_and(f4_le(near, far), active);
+    return f4_bits(*out_hit);
 }
 
 /* The nearest entry distance among the lanes of entered (+inf for none). */
-static inline float packet4_nearest(__m128 tnear, __m128 entered)
+static inline float packet4_nearest(float4 tnear, float4 entered)
 {
-    __m128 t = _mm_or_ps(_mm_and_ps(entered, tnear), _mm_andnot_ps(entered, _mm_set1_ps(INFINITY)));
-    t = _mm_min_ps(t, _mm_shuffle_ps(t, t, _MM_SHUFFLE(1, 0, 3, 2)));
-    t = _mm_min_ps(t, _mm_shuffle_ps(t, t, _MM_SHUFFLE(2, 3, 0, 1)));
-    return _mm_cvtss_f32(t);
-}
-
-static inline __m128 packet4_lanes(unsigned mask)
-{
-    return _mm_castsi128_ps(_mm_set_epi32(mask & 8u ? -1 : 0, mask & 4u ? -1 : 0, mask & 2u ? -1 : 0, mask & 1u ? -1 : 0));
+    return f4_min_lane(f4_select(entered, tnear, f4_set1(INFINITY)));
 }
 
 /* Each lane's closest (any_hit: first found) hit in p->best. */
 static void trace_packet4_f(const cpu_trace_scene *s, vkrt_intersector isect, bool any_hit, packet4 *p)
 {
     const bvh4 *w = s->wide;
-    __m128 root_tnear, entered;
-    const unsigned active = packet4_box(p, w->root_lo, w->root_hi, packet4_lanes(PACKET4_ALL), &root_tnear, &entered);
+    float4 root_tnear, entered;
+    const unsigned active = packet4_box(p, w->root_lo, w->root_hi, f4_mask(PACKET4_ALL), &root_tnear, &entered);
     if (!active) return;
     unsigned done = 0; /* any_hit: lanes that have their hit */
     packet4_item stack[PACKET4_STACK_SIZE];
@@ -130,19 +116,19 @@ static void trace_packet4_f(const cpu_trace_scene *s, vkrt_intersector isect, bo
                 unsigned l = lowest_slot(lanes);
                 if (test_leaf_f(isect, &p->ray[l], s, item.first, item.count, &p->best[l], any_hit)) done |= 1u << l;
             }
-            p->best_t = _mm_setr_ps(prune_bound_f(p->best[0].t), prune_bound_f(p->best[1].t),
-                                    prune_bound_f(p->best[2].t), prune_bound_f(p->best[3].t));
+            p->best_t = f4_set(prune_bound_f(p->best[0].t), prune_bound_f(p->best[1].t), prune_bound_f(p->best[2].t),
+                               prune_bound_f(p->best[3].t));
             if (done == active) return;
         } else {
             const bvh4_node *n = &w->nodes[item.first];
             prefetch_children(s, n);
-            const __m128 lanes = packet4_lanes(item.mask);
+            const float4 lanes = f4_mask(item.mask);
             packet4_item hits[BVH4_WIDTH];
             float key[BVH4_WIDTH];
             uint32_t count = 0;
             for (unsigned k = 0; k < BVH4_WIDTH && n->child[k] != BVH4_EMPTY; k++) {
                 const float lo[3] = { n->lo[0][k], n->lo[1][k], n->lo[2][k] }, hi[3] = { n->hi[0][k], n->hi[1][k], n->hi[2][k] };
-                __m128 tnear;
+                float4 tnear;
                 unsigned mask = packet4_box(p, lo, hi, lanes, &tnear, &entered);
                 if (!mask) continue;
                 /* Stable insertion by the nearest lane's entry distance. */
@@ -169,7 +155,7 @@ static void trace_packet4_f(const cpu_trace_scene *s, vkrt_intersector isect, bo
         unsigned live = 0;
         while (sp > 0 && !live) {
             item = stack[--sp];
-            live = item.mask & ~done & (unsigned)_mm_movemask_ps(_mm_cmple_ps(item.tnear, p->best_t));
+            live = item.mask & ~done & f4_bits(f4_le(item.tnear, p->best_t));
         }
         if (!live) return;
         item.mask = live;
@@ -198,5 +184,3 @@ static bool packet4_coherent(const vkrt_ray rays[PACKET4_LANES])
     }
     return true;
 }
-
-#endif

@@ -1015,17 +1015,13 @@ static void eye_inside_a_closed_mesh_always_hits(void)
 
 static bool same_float(float a, float b) { return memcmp(&a, &b, sizeof a) == 0 || (isnan(a) && isnan(b)); }
 
-/* The SIMD four-box test equals the portable one (intersect_box_f per slot), hit mask and
+/* The four-box test (float4.h) equals intersect_box_f on each slot, hit mask and
  * entry distances bit for bit, on what the slab rules exist for: +0 and -0 direction
  * components (infinite reciprocals), denormal and huge components, origins on a box's planes
  * and corners, flat and infinite boxes, boxes touching the origin, inverted and NaN boxes,
  * unused slots, and best_t of 0, -0, +inf and NaN. */
 static void bvh4_box_test_simd_equals_binary_box_test_on_hostile_inputs(void)
 {
-    if (!cpu_trace_simd4_available()) {
-        fprintf(stderr, "  no SIMD box test in this build: the portable one is intersect_box_f itself\n");
-        return;
-    }
     const float comps[] = { 0.0f, -0.0f, 1.0f, -1.0f, 0.5f, -0.25f, 1e-40f, -1e-40f, 3e38f, -3e38f, 1e-20f };
     const float coords[] = { 0.0f, -0.0f, 1.0f, -1.0f, 0.5f, 2.0f, -3.0f, INFINITY, -INFINITY, FLT_MAX, -FLT_MAX, 1e-30f };
     const float bests[] = { INFINITY, 0.0f, -0.0f, 1.0f, 1e-30f, 3.5f, NAN };
@@ -1087,10 +1083,6 @@ static void bvh4_box_test_simd_equals_binary_box_test_on_hostile_inputs(void)
  * plane, +-0 direction components and hits at tmin and tmax. */
 static void watertight4_equals_scalar_watertight_on_hostile_triangles(void)
 {
-    if (!cpu_trace_simd4_available()) {
-        fprintf(stderr, "  no SIMD triangle test in this build\n");
-        return;
-    }
     test_rng rng = { 4077 };
     vkrt_gpu_tri tri[4];
     size_t tests = 0, hits = 0, differ = 0;
