@@ -79,6 +79,13 @@ layout(set = 0, binding = VKRT_BINDING_TEXELS, std430) readonly buffer Texels {
 layout(set = 0, binding = VKRT_BINDING_WIDE_NODES) uniform usamplerBuffer wide_nodes;
 layout(set = 0, binding = VKRT_BINDING_TRACE_TRIS) uniform usamplerBuffer trace_tris;
 layout(set = 0, binding = VKRT_BINDING_TRACE_VERTS) uniform usamplerBuffer trace_verts;
+/* The wide traversal's view of the rays and hits buffers: a ray is two texels, a hit one.
+ * lavapipe runs a storage-buffer access as a loop over the lanes with a bounds check per word,
+ * a texel access as one gather or scatter; the ray refill is in every step of the wide
+ * traversal's loop, and through texels a trace takes 12% fewer instructions (valgrind's count)
+ * and 9-13% less time. */
+layout(set = 0, binding = VKRT_BINDING_RAY_TEXELS) uniform usamplerBuffer ray_texels;
+layout(set = 0, binding = VKRT_BINDING_HIT_TEXELS, rgba32ui) uniform uimageBuffer hit_texels;
 /* A split scene's piece addresses (a placeholder otherwise): the nodes, triangles and surfaces
  * bindings then hold only the first piece of each. */
 layout(set = 0, binding = VKRT_BINDING_PIECES, std430) readonly buffer Pieces {
@@ -257,13 +264,26 @@ bool trace_bvh(ray r, uint slot, inout hit best, inout heat_counts heat)
  * variant's into vkrt_hit afterwards). */
 bool load_wide_ray(uint index, out ray r)
 {
-    return ray_from_buffer(rays[index], r);
+    vec4 a = uintBitsToFloat(texelFetch(ray_texels, int(2u * index)));
+    vec4 b = uintBitsToFloat(texelFetch(ray_texels, int(2u * index + 1u)));
+    return ray_from_buffer(vkrt_gpu_ray(a.xyz, a.w, b.xyz, b.w), r);
+}
+
+void store_wide_hit_texel(uint index, vkrt_gpu_hit h)
+{
+    imageStore(hit_texels, int(index), uvec4(floatBitsToUint(h.t), h.tri, floatBitsToUint(h.u), floatBitsToUint(h.v)));
+}
+
+vkrt_gpu_hit load_wide_hit_texel(uint index)
+{
+    uvec4 h = imageLoad(hit_texels, int(index));
+    return vkrt_gpu_hit(uintBitsToFloat(h.x), h.y, uintBitsToFloat(h.z), uintBitsToFloat(h.w));
 }
 
 void store_wide_hit(uint index, hit best)
 {
-    hits[index] = best.prim != NO_PRIM ? vkrt_gpu_hit(best.t, best.tri, best.u, best.v)
-                                       : vkrt_gpu_hit(-1.0, NO_PRIM, 0.0, 0.0);
+    store_wide_hit_texel(index, best.prim != NO_PRIM ? vkrt_gpu_hit(best.t, best.tri, best.u, best.v)
+                                                     : vkrt_gpu_hit(-1.0, NO_PRIM, 0.0, 0.0));
 }
 
 #include "traverse_wide.glsl"
@@ -430,12 +450,12 @@ void trace_buffer_rays_wide()
     for (uint k = 0u; k < WIDE_RAYS; k++) {
         uint index = wide_ray_index(k);
         if (index >= p.tile_width) break;
-        vkrt_gpu_hit h = hits[index];
+        vkrt_gpu_hit h = load_wide_hit_texel(index);
         if (h.tri == NO_PRIM) continue;
         load_wide_ray(index, r);
         hit b = hit(h.t, h.u, h.v, h.tri, load_tri(h.tri).prim_id);
         finish_ray_hit(r, b);
-        hits[index] = vkrt_gpu_hit(b.t, b.prim, b.u, b.v);
+        store_wide_hit_texel(index, vkrt_gpu_hit(b.t, b.prim, b.u, b.v));
     }
 }
 

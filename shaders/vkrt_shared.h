@@ -46,8 +46,12 @@ typedef struct vkrt_float3 { float x, y, z; } vkrt_float3;
 #define VKRT_BINDING_WIDE_NODES 14     /* uniform texel buffer (RGBA32UI): the wide BVH (VKRT_SPEC_WIDE) */
 #define VKRT_BINDING_TRACE_TRIS 15     /* uniform texel buffer (RGBA32UI): the triangles' corner indices */
 #define VKRT_BINDING_TRACE_VERTS 16    /* uniform texel buffer (RGBA32UI): their corners */
-#define VKRT_BINDING_TEXEL_COUNT 3     /* the uniform texel buffers, the last bindings */
-#define VKRT_BINDING_COUNT 17          /* bindings 0 .. 16: the image one, the texel buffers,
+#define VKRT_BINDING_RAY_TEXELS 17     /* uniform texel buffer (RGBA32UI) over the rays buffer: a ray
+                                          is two texels (the wide traversal's reads) */
+#define VKRT_BINDING_HIT_TEXELS 18     /* storage texel buffer (RGBA32UI) over the hits buffer: a hit
+                                          is one texel (the wide traversal's writes) */
+#define VKRT_BINDING_TEXEL_COUNT 4     /* the uniform texel buffers, bindings 14 .. 17 */
+#define VKRT_BINDING_COUNT 19          /* bindings 0 .. 18: the image one, the texel buffers,
                                           storage buffers the rest */
 
 /* Descriptor bindings of shade.comp (set 0): the lighting modes' wavefront stages. The ray and

@@ -110,9 +110,11 @@ static vkrt_result upload_wide(vk_context *vk, const bvh *b, const vkrt_gpu_tri 
     out->wide_pack_ms = core_now_ms() - t0;
     if (r != VKRT_OK) return r;
     const uint64_t texel_limit = vk->properties.limits.maxTexelBufferElements;
+    /* The wide traversal also reads a chunk's rays (two texels each) and writes its hits (one)
+     * through texel views of the ray and hit buffers. */
     const bool usable = w.node_count && wide_traversal_fits(w.depth, w.tri_count) &&
                         (uint64_t)w.node_count * VKRT_WIDE_NODE_TEXELS <= texel_limit && w.tri_count <= texel_limit &&
-                        w.vertex_count <= texel_limit;
+                        w.vertex_count <= texel_limit && 2ull * VKRT_RAY_CHUNK <= texel_limit;
     r = vk_texel_buffer_create(vk, w.node_texels, usable ? w.node_count * VKRT_WIDE_NODE_TEXELS : 0, "vkrt wide BVH",
                                &out->wide_nodes);
     if (r == VKRT_OK)
@@ -273,6 +275,7 @@ typedef struct render_objects {
     vk_buffer readback;
     vk_buffer hits;
     vk_buffer rays;
+    VkBufferView hit_texels, ray_texels; /* RGBA32UI views of hits and rays (the wide traversal's) */
     vk_buffer resume;
     vk_buffer resume_stack;
     vk_buffer unfinished; /* host-visible: read after every submission */
@@ -289,6 +292,8 @@ static void render_objects_destroy(vk_context *vk, render_objects *o)
     if (o->view) vkDestroyImageView(vk->device, o->view, NULL);
     if (o->image) vkDestroyImage(vk->device, o->image, NULL);
     vk_memory_free(vk, o->image_memory, &o->image_allocation);
+    if (o->hit_texels) vkDestroyBufferView(vk->device, o->hit_texels, NULL);
+    if (o->ray_texels) vkDestroyBufferView(vk->device, o->ray_texels, NULL);
     vk_buffer_destroy(vk, &o->readback);
     vk_buffer_destroy(vk, &o->hits);
     vk_buffer_destroy(vk, &o->rays);
@@ -351,11 +356,12 @@ static vkrt_result create_descriptors(vk_context *vk, const gpu_scene *scene, Vk
                                       render_objects *o)
 {
     VkDescriptorPoolSize sizes[] = {
-        { VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, VKRT_BINDING_COUNT - 1 - VKRT_BINDING_TEXEL_COUNT }, /* all but: */
+        { VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, VKRT_BINDING_COUNT - 2 - VKRT_BINDING_TEXEL_COUNT }, /* all but: */
         { VK_DESCRIPTOR_TYPE_STORAGE_IMAGE, 1 },
         { VK_DESCRIPTOR_TYPE_UNIFORM_TEXEL_BUFFER, VKRT_BINDING_TEXEL_COUNT },
+        { VK_DESCRIPTOR_TYPE_STORAGE_TEXEL_BUFFER, 1 },
     };
-    vkrt_result r = vk_descriptor_set_create(vk, layout, sizes, 3, &o->pool, &o->set);
+    vkrt_result r = vk_descriptor_set_create(vk, layout, sizes, 4, &o->pool, &o->set);
     if (r != VKRT_OK) return r;
     /* Every storage buffer whole, at its binding; then the image. */
     const struct {
@@ -371,10 +377,10 @@ static vkrt_result create_descriptors(vk_context *vk, const gpu_scene *scene, Vk
         { VKRT_BINDING_PIECES, scene->pieces.buffer },
     };
     enum { BUFFERS = sizeof buffers / sizeof buffers[0] };
-    _Static_assert(BUFFERS == VKRT_BINDING_COUNT - 1 - VKRT_BINDING_TEXEL_COUNT,
+    _Static_assert(BUFFERS == VKRT_BINDING_COUNT - 2 - VKRT_BINDING_TEXEL_COUNT,
                    "every binding but the image and the texel buffers has a buffer here");
     VkDescriptorBufferInfo infos[BUFFERS];
-    VkWriteDescriptorSet writes[BUFFERS + 1 + VKRT_BINDING_TEXEL_COUNT];
+    VkWriteDescriptorSet writes[BUFFERS + 1 + VKRT_BINDING_TEXEL_COUNT + 1];
     for (uint32_t i = 0; i < BUFFERS; i++) {
         infos[i] = (VkDescriptorBufferInfo){ buffers[i].buffer, 0, VK_WHOLE_SIZE };
         writes[i] = (VkWriteDescriptorSet){ .sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET, .dstSet = o->set,
@@ -386,7 +392,7 @@ static vkrt_result create_descriptors(vk_context *vk, const gpu_scene *scene, Vk
                                               .dstBinding = VKRT_BINDING_IMAGE, .descriptorCount = 1,
                                               .descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_IMAGE, .pImageInfo = &image };
     const VkBufferView texels[VKRT_BINDING_TEXEL_COUNT] = { scene->wide_nodes.view, scene->trace_tris.view,
-                                                            scene->trace_verts.view };
+                                                            scene->trace_verts.view, o->ray_texels };
     for (uint32_t i = 0; i < VKRT_BINDING_TEXEL_COUNT; i++)
         writes[BUFFERS + 1 + i] = (VkWriteDescriptorSet){ .sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET,
                                                           .dstSet = o->set,
@@ -394,10 +400,17 @@ static vkrt_result create_descriptors(vk_context *vk, const gpu_scene *scene, Vk
                                                           .descriptorCount = 1,
                                                           .descriptorType = VK_DESCRIPTOR_TYPE_UNIFORM_TEXEL_BUFFER,
                                                           .pTexelBufferView = &texels[i] };
+    writes[BUFFERS + 1 + VKRT_BINDING_TEXEL_COUNT] =
+        (VkWriteDescriptorSet){ .sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET, .dstSet = o->set,
+                                .dstBinding = VKRT_BINDING_HIT_TEXELS, .descriptorCount = 1,
+                                .descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_TEXEL_BUFFER,
+                                .pTexelBufferView = &o->hit_texels };
     _Static_assert(VKRT_BINDING_TRACE_TRIS == VKRT_BINDING_WIDE_NODES + 1 &&
                        VKRT_BINDING_TRACE_VERTS == VKRT_BINDING_WIDE_NODES + 2 &&
-                       VKRT_BINDING_WIDE_NODES + VKRT_BINDING_TEXEL_COUNT == VKRT_BINDING_COUNT,
-                   "the texel buffers' bindings are adjacent, and the last");
+                       VKRT_BINDING_RAY_TEXELS == VKRT_BINDING_WIDE_NODES + 3 &&
+                       VKRT_BINDING_WIDE_NODES + VKRT_BINDING_TEXEL_COUNT == VKRT_BINDING_HIT_TEXELS &&
+                       VKRT_BINDING_HIT_TEXELS + 1 == VKRT_BINDING_COUNT,
+                   "the uniform texel buffers' bindings are adjacent, then the storage texel buffer, the last");
     vkUpdateDescriptorSets(vk->device, sizeof writes / sizeof writes[0], writes, 0, NULL);
     return VKRT_OK;
 }
@@ -420,13 +433,19 @@ static vkrt_result create_render_objects(vk_context *vk, const gpu_scene *scene,
     /* Every binding of the layout gets a buffer; one the variant never reads gets a minimal one. */
     if (r == VKRT_OK)
         r = vk_buffer_create(vk, (VkDeviceSize)(hit_count ? hit_count : 1) * sizeof(vkrt_gpu_hit),
-                             VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT |
-                                 VK_BUFFER_USAGE_TRANSFER_SRC_BIT,
+                             VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_STORAGE_TEXEL_BUFFER_BIT |
+                                 VK_BUFFER_USAGE_TRANSFER_DST_BIT | VK_BUFFER_USAGE_TRANSFER_SRC_BIT,
                              VK_MEMORY_DEVICE, "vkrt hits", &o->hits);
     if (r == VKRT_OK)
         r = vk_buffer_create(vk, (VkDeviceSize)(ray_count ? ray_count : 1) * sizeof(vkrt_gpu_ray),
-                             VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT, VK_MEMORY_DEVICE,
-                             "vkrt rays", &o->rays);
+                             VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_UNIFORM_TEXEL_BUFFER_BIT |
+                                 VK_BUFFER_USAGE_TRANSFER_DST_BIT,
+                             VK_MEMORY_DEVICE, "vkrt rays", &o->rays);
+    /* The same memory seen as texels: the wide traversal reads rays and writes hits through
+     * them (lavapipe's storage-buffer accesses go a lane and a word at a time). */
+    _Static_assert(sizeof(vkrt_gpu_hit) == 16 && sizeof(vkrt_gpu_ray) == 32, "a hit is one texel, a ray two");
+    if (r == VKRT_OK) r = vk_buffer_view_create(vk, o->hits.buffer, o->hits.size, &o->hit_texels);
+    if (r == VKRT_OK) r = vk_buffer_view_create(vk, o->rays.buffer, o->rays.size, &o->ray_texels);
     const VkDeviceSize slots = resume_slots ? resume_slots : 1;
     if (r == VKRT_OK)
         r = vk_buffer_create(vk, slots * sizeof(vkrt_gpu_resume), VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, VK_MEMORY_DEVICE,

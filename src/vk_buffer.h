@@ -27,7 +27,6 @@ void vk_buffer_destroy(vk_context *vk, vk_buffer *b);
  * needs vk->buffer_address). */
 VkDeviceAddress vk_buffer_address(vk_context *vk, const vk_buffer *b);
 
-/* Fills a device buffer: a memcpy when it is mapped, else through a staging buffer. */
 /* A read-only uniform texel buffer of RGBA32UI texels and its view (the wide traversal's
  * arrays: texel fetches are lavapipe's fastest reads). `texels` of 0 makes a one-texel
  * placeholder for a binding the variant never reads. */
@@ -38,8 +37,13 @@ typedef struct vk_texel_buffer {
 
 vkrt_result vk_texel_buffer_create(vk_context *vk, const uint32_t *data, uint32_t texels, const char *label,
                                    vk_texel_buffer *out);
+/* An RGBA32UI view of the first `bytes` (at least 16) of buffer, created with a texel-buffer
+ * usage: as many whole texels as they hold, at most the device's maxTexelBufferElements. Destroy
+ * with vkDestroyBufferView. */
+vkrt_result vk_buffer_view_create(vk_context *vk, VkBuffer buffer, VkDeviceSize bytes, VkBufferView *out);
 void vk_texel_buffer_destroy(vk_context *vk, vk_texel_buffer *t);
 
+/* Fills a device buffer: a memcpy when it is mapped, else through a staging buffer. */
 vkrt_result vk_buffer_upload(vk_context *vk, vk_buffer *dst, const void *data, VkDeviceSize size);
 /* Makes device writes visible to the host before reading b->mapped. */
 vkrt_result vk_buffer_invalidate(vk_context *vk, vk_buffer *b);
