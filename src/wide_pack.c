@@ -104,11 +104,16 @@ static void pack_node(const bvh4_node *n, uint32_t *texels)
 }
 
 /* Distinct corner positions, by their bits (so -0 and +0 stay apart and every corner reads
- * back exactly as the triangle array holds it): an open-addressing table of vertex indices. */
+ * back exactly as the triangle array holds it): an open-addressing table of vertex indices,
+ * at most half full. Both it and the vertices grow as corners come: a closed mesh has about
+ * half a distinct corner per triangle, a triangle soup three, and sizing for the soup would
+ * hold some 75 bytes a triangle (750 MB for ten million) through the packing of any mesh. */
 typedef struct vertex_table {
+    core *c;
     uint32_t *slots;
-    uint32_t mask;
-    uint32_t *texels; /* 4 words a vertex */
+    uint64_t slot_count;   /* a power of two */
+    uint32_t *texels;      /* 4 words a vertex */
+    size_t capacity;       /* vertices texels has room for */
     uint32_t count;
 } vertex_table;
 
@@ -118,67 +123,96 @@ static uint32_t position_hash(const uint32_t p[3])
     return h ^ (h >> 15);
 }
 
-static uint32_t vertex_index(vertex_table *t, vkrt_float3 v)
+/* The free slot where vertex p belongs, or the slot that holds it. */
+static uint32_t *find_slot(const vertex_table *t, const uint32_t p[3])
+{
+    const uint64_t mask = t->slot_count - 1;
+    for (uint64_t i = position_hash(p) & mask;; i = (i + 1) & mask) {
+        uint32_t *slot = &t->slots[i];
+        if (*slot == NO_VERTEX || memcmp(t->texels + (size_t)*slot * 4, p, 3 * sizeof *p) == 0) return slot;
+    }
+}
+
+/* A table of `slot_count` slots (a power of two) with every vertex so far in it. */
+static bool rehash(vertex_table *t, uint64_t slot_count)
+{
+    if (slot_count > (uint64_t)UINT32_MAX + 1 || slot_count > SIZE_MAX / sizeof *t->slots) return false;
+    uint32_t *slots = core_alloc_array(t->c, (size_t)slot_count, sizeof *slots);
+    if (!slots) return false;
+    memset(slots, 0xFF, (size_t)slot_count * sizeof *slots);
+    core_free(t->c, t->slots);
+    t->slots = slots;
+    t->slot_count = slot_count;
+    for (uint32_t k = 0; k < t->count; k++) *find_slot(t, t->texels + (size_t)k * 4) = k;
+    return true;
+}
+
+/* The index of corner v, a new vertex if no earlier corner had its bits; false when out of
+ * memory. */
+static bool vertex_index(vertex_table *t, vkrt_float3 v, uint32_t *out)
 {
     const uint32_t p[3] = { float_bits(v.x), float_bits(v.y), float_bits(v.z) };
-    for (uint32_t i = position_hash(p) & t->mask;; i = (i + 1) & t->mask) {
-        const uint32_t k = t->slots[i];
-        if (k == NO_VERTEX) {
-            uint32_t *texel = t->texels + (size_t)t->count * 4;
-            memcpy(texel, p, sizeof p);
-            texel[3] = 0;
-            return t->slots[i] = t->count++;
-        }
-        if (memcmp(t->texels + (size_t)k * 4, p, sizeof p) == 0) return k;
+    uint32_t *slot = find_slot(t, p);
+    if (*slot != NO_VERTEX) {
+        *out = *slot;
+        return true;
     }
+    if ((uint64_t)t->count + 1 > t->slot_count / 2) {
+        if (!rehash(t, t->slot_count * 2)) return false;
+        slot = find_slot(t, p);
+    }
+    if (core_grow(t->c, (void **)&t->texels, &t->capacity, (size_t)t->count + 1, 4 * sizeof(uint32_t)) != 0) return false;
+    uint32_t *texel = t->texels + (size_t)t->count * 4;
+    memcpy(texel, p, sizeof p);
+    texel[3] = 0;
+    *out = *slot = t->count++;
+    return true;
 }
 
 vkrt_result wide_pack(core *c, const bvh *b, const vkrt_gpu_tri *tris, wide_arrays *out)
 {
     memset(out, 0, sizeof *out);
-    /* Triangle counts up to VKRT_TRACE_TRI_LAST (wide_traversal_fits) keep these in range. */
-    const uint64_t corners = (uint64_t)b->tri_count * 3;
-    uint64_t table_size = 1;
-    while (table_size < 2 * corners) table_size *= 2;
     bvh4 w;
     vkrt_result r = bvh4_collapse(c, b, &w);
     if (r != VKRT_OK) return r;
-    vertex_table t = { .mask = (uint32_t)(table_size - 1) };
-    const bool fits = table_size <= UINT32_MAX;
+    /* Room to start with for a closed mesh's vertices; triangle counts up to
+     * VKRT_TRACE_TRI_LAST (wide_traversal_fits) keep the indices in range. */
+    vertex_table t = { .c = c };
+    bool ok = core_grow(c, (void **)&t.texels, &t.capacity, (size_t)b->tri_count / 2 + 16, 4 * sizeof(uint32_t)) == 0;
+    uint64_t slots = 64;
+    while (slots < 2 * (uint64_t)t.capacity) slots *= 2;
+    ok = ok && rehash(&t, slots);
     out->node_texels = core_alloc_array(c, (size_t)w.node_count * VKRT_WIDE_NODE_TEXELS, 4 * sizeof(uint32_t));
     out->tri_texels = core_alloc_array(c, b->tri_count, 4 * sizeof(uint32_t));
-    t.texels = fits ? core_alloc_array(c, (size_t)corners, 4 * sizeof(uint32_t)) : NULL;
-    t.slots = fits ? core_alloc_array(c, (size_t)table_size, sizeof *t.slots) : NULL;
-    if (!out->node_texels || !out->tri_texels || !t.texels || !t.slots) {
-        bvh4_destroy(c, &w);
+    ok = ok && out->node_texels && out->tri_texels;
+    if (ok)
+        for (uint32_t i = 0; i < w.node_count; i++)
+            pack_node(&w.nodes[i], out->node_texels + (size_t)i * VKRT_WIDE_NODE_TEXELS * 4);
+    for (uint32_t i = 0; ok && i < b->tri_count; i++) {
+        uint32_t *texel = out->tri_texels + (size_t)i * 4;
+        ok = vertex_index(&t, tris[i].v0, &texel[0]) && vertex_index(&t, tris[i].v1, &texel[1]) &&
+             vertex_index(&t, tris[i].v2, &texel[2]);
+        texel[3] = tris[i].prim_id;
+    }
+    const uint32_t node_count = w.node_count, depth = w.depth;
+    bvh4_destroy(c, &w);
+    core_free(c, t.slots);
+    if (!ok) {
         core_free(c, t.texels);
-        core_free(c, t.slots);
         wide_arrays_destroy(c, out);
         return core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "out of memory packing the wide BVH of %u triangles",
                          b->tri_count);
-    }
-    memset(t.slots, 0xFF, (size_t)table_size * sizeof *t.slots);
-    for (uint32_t i = 0; i < w.node_count; i++)
-        pack_node(&w.nodes[i], out->node_texels + (size_t)i * VKRT_WIDE_NODE_TEXELS * 4);
-    for (uint32_t i = 0; i < b->tri_count; i++) {
-        uint32_t *texel = out->tri_texels + (size_t)i * 4;
-        texel[0] = vertex_index(&t, tris[i].v0);
-        texel[1] = vertex_index(&t, tris[i].v1);
-        texel[2] = vertex_index(&t, tris[i].v2);
-        texel[3] = tris[i].prim_id;
     }
     /* Leaves partition the triangle array: mark where each ends. */
     for (uint32_t i = 0; i < b->node_count; i++) {
         const vkrt_gpu_node *n = &b->nodes[i];
         if (n->tri_count) out->tri_texels[(size_t)(n->left_first + n->tri_count - 1) * 4 + 3] |= VKRT_TRACE_TRI_LAST;
     }
-    core_free(c, t.slots);
     out->vertex_texels = t.texels;
     out->vertex_count = t.count;
-    out->node_count = w.node_count;
+    out->node_count = node_count;
     out->tri_count = b->tri_count;
-    out->depth = w.depth;
-    bvh4_destroy(c, &w);
+    out->depth = depth;
     return VKRT_OK;
 }
 
