@@ -71,20 +71,18 @@ static float e_andnot(float a, float b) { return float_of(~bits_of(a) & bits_of(
 
 static void arithmetic_comparisons_and_bit_operations_are_their_expressions(void)
 {
-    check_binary("f4_add", f4_add, e_add);
-    check_binary("f4_sub", f4_sub, e_sub);
-    check_binary("f4_mul", f4_mul, e_mul);
-    check_binary("f4_div", f4_div, e_div);
-    check_binary("f4_min", f4_min, e_min);
-    check_binary("f4_max", f4_max, e_max);
-    check_binary("f4_lt", f4_lt, e_lt);
-    check_binary("f4_le", f4_le, e_le);
-    check_binary("f4_gt", f4_gt, e_gt);
-    check_binary("f4_ge", f4_ge, e_ge);
-    check_binary("f4_eq", f4_eq, e_eq);
-    check_binary("f4_and", f4_and, e_and);
-    check_binary("f4_or", f4_or, e_or);
-    check_binary("f4_andnot", f4_andnot, e_andnot);
+    static const struct {
+        const char *name;
+        float4 (*op)(float4, float4);
+        float (*expect)(float, float);
+    } ops[] = {
+        { "f4_add", f4_add, e_add }, { "f4_sub", f4_sub, e_sub }, { "f4_mul", f4_mul, e_mul },
+        { "f4_div", f4_div, e_div }, { "f4_min", f4_min, e_min }, { "f4_max", f4_max, e_max },
+        { "f4_lt", f4_lt, e_lt },    { "f4_le", f4_le, e_le },    { "f4_gt", f4_gt, e_gt },
+        { "f4_ge", f4_ge, e_ge },    { "f4_eq", f4_eq, e_eq },    { "f4_and", f4_and, e_and },
+        { "f4_or", f4_or, e_or },    { "f4_andnot", f4_andnot, e_andnot },
+    };
+    for (size_t i = 0; i < sizeof ops / sizeof ops[0]; i++) check_binary(ops[i].name, ops[i].op, ops[i].expect);
 }
 
 static void masks_selects_and_lane_operations_are_their_expressions(void)
