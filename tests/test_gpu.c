@@ -537,6 +537,29 @@ static void gpu_wide_traversal_matches_the_binary_one(void)
     CHECK_MSG(wide->gpu.wide && !binary->gpu.wide, "wide arrays uploaded: %d and %d", wide->gpu.wide, binary->gpu.wide);
     const size_t n = VKRT_RAY_CHUNK + 777;
     vkrt_ray *rays = random_rays_in_box(n, 99);
+    /* Every fourth ray parallel to one or two axes (+-0 components) with its origin on box
+     * planes in them: vertex coordinates, as the binary boxes' bounds and the wide nodes'
+     * frames are. Both traversals' slab tests take their branch for 0 * inf there (slab4 in
+     * the wide one); the hits must be the same. */
+    vkrt_scene_stats st = { 0 };
+    float *pos = NULL;
+    if (vkrt_scene_stats_get(wide, &st) == VKRT_OK && (pos = malloc(st.triangles * 9 * sizeof *pos)) &&
+        vkrt_scene_triangles_get(wide, pos, st.triangles * 9) == VKRT_OK) {
+        test_rng rng = { 1234 };
+        for (size_t i = 0; i < n; i += 4) {
+            const int axis = (int)(rng_uniform(&rng) * 3) % 3, both = rng_uniform(&rng) < 0.5;
+            for (int a = 0; a < 3; a++) {
+                const float v = pos[(size_t)(rng_uniform(&rng) * (double)st.triangles) % st.triangles * 9 +
+                                    (size_t)(rng_uniform(&rng) * 3) % 3 * 3 + a];
+                const bool zero = a != axis && (both || a == (axis + 1) % 3);
+                rays[i].origin[a] = zero ? v : (rng_uniform(&rng) < 0.5 ? -0.7f : 0.7f);
+                rays[i].dir[a] = zero ? (rng_uniform(&rng) < 0.5 ? 0.0f : -0.0f)
+                                      : (rays[i].origin[a] > 0 ? -1.0f : 1.0f) * (float)(0.2 + rng_uniform(&rng));
+            }
+            rays[i].tmax = 0.0f;
+        }
+    }
+    free(pos);
     for (int any = 0; any < 2; any++)
         for (int isect = VKRT_INTERSECTOR_WATERTIGHT; isect <= VKRT_INTERSECTOR_MOLLER_TRUMBORE; isect++) {
             vkrt_trace_desc d = { .intersector = (vkrt_intersector)isect, .any_hit = any };
