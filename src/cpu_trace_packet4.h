@@ -40,12 +40,7 @@ typedef struct packet4_item {
 static void packet4_setup(packet4 *p)
 {
     const ray_f *r = p->ray;
-    p->any_parallel = false;
-    for (int l = 0; l < PACKET4_LANES; l++) {
-        p->best[l] = (hit_f){ .t = r[l].tmax, .tri = NO_PRIM, .prim = NO_PRIM };
-        p->any_parallel |= f_abs_f(r[l].inv_dir.x) == INFINITY || f_abs_f(r[l].inv_dir.y) == INFINITY ||
-                           f_abs_f(r[l].inv_dir.z) == INFINITY;
-    }
+    for (int l = 0; l < PACKET4_LANES; l++) p->best[l] = (hit_f){ .t = r[l].tmax, .tri = NO_PRIM, .prim = NO_PRIM };
     p->origin[0] = f4_set(r[0].origin.x, r[1].origin.x, r[2].origin.x, r[3].origin.x);
     p->origin[1] = f4_set(r[0].origin.y, r[1].origin.y, r[2].origin.y, r[3].origin.y);
     p->origin[2] = f4_set(r[0].origin.z, r[1].origin.z, r[2].origin.z, r[3].origin.z);
@@ -53,6 +48,7 @@ static void packet4_setup(packet4 *p)
     p->inv_dir[1] = f4_set(r[0].inv_dir.y, r[1].inv_dir.y, r[2].inv_dir.y, r[3].inv_dir.y);
     p->inv_dir[2] = f4_set(r[0].inv_dir.z, r[1].inv_dir.z, r[2].inv_dir.z, r[3].inv_dir.z);
     for (int a = 0; a < 3; a++) p->parallel[a] = f4_eq(f4_abs(p->inv_dir[a]), f4_set1(INFINITY));
+    p->any_parallel = f4_bits(f4_or(f4_or(p->parallel[0], p->parallel[1]), p->parallel[2])) != 0;
     p->tmin = f4_set(r[0].tmin, r[1].tmin, r[2].tmin, r[3].tmin);
     /* Per lane the prune bound of the closest hit so far (prune_bound_f): what boxes and stack
      * entries are held to. */

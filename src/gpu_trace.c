@@ -486,13 +486,21 @@ static uint32_t div_up(uint32_t a, uint32_t b)
     return (a + b - 1) / b;
 }
 
-/* The continuation slots a budgeted pass over `rays` rays of a ray buffer needs: one a ray,
- * or, where the wide traversal traces VKRT_WIDE_RAYS_PER_LANE rays in each invocation, one an
- * invocation of the dispatch (trace_buffer_rays_wide's slot), an eighth of the memory. */
+/* The 1D workgroups of a dispatch over `rays` rays of a ray buffer: one invocation a ray, or
+ * with the wide traversal one per VKRT_WIDE_RAYS_PER_LANE rays; VKRT_RAY_CHUNK keeps the
+ * count far below the 65,535 a dispatch allows. */
+static uint32_t ray_groups(const gpu_scene *scene, bool naive, uint32_t rays)
+{
+    const uint32_t per_invocation = wide_traversal(scene, naive) ? VKRT_WIDE_RAYS_PER_LANE : 1;
+    return div_up(rays, VKRT_TRACE_GROUP_SIZE * per_invocation);
+}
+
+/* The continuation slots a budgeted pass over `rays` rays needs: one an invocation (the
+ * slot trace_buffer_ray and trace_buffer_rays_wide use), so the wide traversal needs an
+ * eighth of the memory. */
 static uint32_t ray_resume_slots(const gpu_scene *scene, bool naive, uint32_t rays)
 {
-    if (!wide_traversal(scene, naive)) return rays;
-    return div_up(rays, VKRT_TRACE_GROUP_SIZE * VKRT_WIDE_RAYS_PER_LANE) * VKRT_TRACE_GROUP_SIZE;
+    return wide_traversal(scene, naive) ? ray_groups(scene, naive, rays) * VKRT_TRACE_GROUP_SIZE : rays;
 }
 
 static uint32_t gpu_mode(vkrt_mode m)
@@ -918,12 +926,7 @@ static void record_rays(VkCommandBuffer cmd, const vk_trace_pipeline *pipe, cons
     vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_HOST_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT | VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
                          VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT, 0, 1, &inputs, 0, NULL,
                          0, NULL);
-    /* One invocation per ray (the wide traversal: per VKRT_WIDE_RAYS_PER_LANE rays), 1D over
-     * whole workgroups; VKRT_RAY_CHUNK keeps the count of groups far below the 65,535 a
-     * dispatch allows. */
-    const uint32_t per_invocation = wide_traversal(scene, naive) ? VKRT_WIDE_RAYS_PER_LANE : 1;
-    record_dispatches(cmd, pipe, o, scene, push, naive, budget, range,
-                      div_up(push.tile_width, VKRT_TRACE_GROUP_SIZE * per_invocation), 1);
+    record_dispatches(cmd, pipe, o, scene, push, naive, budget, range, ray_groups(scene, naive, push.tile_width), 1);
     if (device_only) return;
     /* The copy reads the hits the shader wrote. */
     record_buffer_barrier(cmd, o->hits.buffer, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_WRITE_BIT,
