@@ -1,5 +1,5 @@
 /* Traversal of the wide BVH (VKRT_SPEC_WIDE; layouts in vkrt_shared.h), read through texel
- * buffers. One step tests a node's four child boxes from one fetch of seven texels, visits the
+ * buffers. One step tests a node's four child boxes from one read of its four texels, visits the
  * nearest child next and pushes the others farthest first, so the stack pops them nearest
  * first; a leaf's triangles follow each other in the triangle array up to the one marked
  * VKRT_TRACE_TRI_LAST. The answers are trace_bvh's: the box test is intersect_box's
@@ -12,24 +12,31 @@
  * visits a node, or tests one triangle (the first of a leaf together with the step that
  * reached it), budgeted in the same way (VKRT_SPEC_BUDGET) with the same continuation state.
  *
- * Included by trace.comp after test_triangle_data, mark_finished, load_wide_ray and
- * store_wide_hit. */
+ * Included by trace.comp after test_triangle_data, mark_finished, load_wide_ray, load_wide_tri
+ * and store_wide_hit. */
 #ifndef VKRT_TRAVERSE_WIDE_GLSL
 #define VKRT_TRAVERSE_WIDE_GLSL
 
 #define NO_TRI 0xFFFFFFFFu
 
-/* intersect_box's slab() for one axis of four boxes. */
+/* One axis of four boxes: the interval of distances where the ray is within the slab, never
+ * narrower than intersect_box's slab(), so no box that one enters is culled. Without slab()'s
+ * branch for a ray parallel to the slab (inv = +-infinity, lavapipe runs both sides of it):
+ * there (lo - o) * inv is -infinity or +infinity by the side o lies on, so the interval is
+ * everything with o inside and empty at one infinity with o outside, as slab() has it, but
+ * for o on a plane, where 0 * infinity is NaN: the interval is then everything, as in slab()
+ * (o on a plane is inside). An empty interval at +infinity may be entered where every other
+ * axis's far distance overflows to +infinity: a box visited needlessly, never one culled.
+ * 1% fewer instructions a trace. */
 void slab4(float o, float inv, vec4 lo, vec4 hi, out vec4 out_lo, out vec4 out_hi)
 {
     precise vec4 t0 = (lo - o) * inv;
     precise vec4 t1 = (hi - o) * inv;
-    bool parallel = abs(inv) == T_INFINITY;
-    bvec4 inside = bvec4(uvec4(greaterThanEqual(vec4(o), lo)) & uvec4(lessThanEqual(vec4(o), hi)));
+    bvec4 on_plane = bvec4(uvec4(isnan(t0)) | uvec4(isnan(t1)));
     /* f_min and f_max of trace_common.glsl, per component. */
     vec4 t_min = mix(t0, t1, lessThan(t1, t0)), t_max = mix(t0, t1, lessThan(t0, t1));
-    out_lo = parallel ? mix(vec4(T_INFINITY), vec4(-T_INFINITY), inside) : t_min;
-    out_hi = parallel ? mix(vec4(-T_INFINITY), vec4(T_INFINITY), inside) : t_max;
+    out_lo = mix(t_min, vec4(-T_INFINITY), on_plane);
+    out_hi = mix(t_max, vec4(T_INFINITY), on_plane);
 }
 
 vec4 f_min4(vec4 x, vec4 y) { return mix(x, y, lessThan(y, x)); }
@@ -68,9 +75,9 @@ vec4 dequantise(float origin, float scale, uint bytes)
 uint visit_wide_node(ray r, uint node, float best_t, out uvec4 keys, out uvec4 children)
 {
     int base = int(node * VKRT_WIDE_NODE_TEXELS);
-    uvec4 frame = texelFetch(wide_nodes, base), q_a = texelFetch(wide_nodes, base + 1);
-    uvec4 q_b = texelFetch(wide_nodes, base + 2);
-    children = texelFetch(wide_nodes, base + 3);
+    uvec4 frame = imageLoad(wide_nodes, base), q_a = imageLoad(wide_nodes, base + 1);
+    uvec4 q_b = imageLoad(wide_nodes, base + 2);
+    children = imageLoad(wide_nodes, base + 3);
     vec3 origin = uintBitsToFloat(frame.xyz);
     vec3 scale = uintBitsToFloat(((uvec3(frame.w) >> uvec3(0u, 8u, 16u)) & 0xFFu) << 23u);
     vec4 lo_x = dequantise(origin.x, scale.x, q_a.x), lo_y = dequantise(origin.y, scale.y, q_a.y);
@@ -199,12 +206,9 @@ bool trace_wide(ray r, bool valid, uint slot, uint k, inout hit best)
          * loop body for all eight lanes of a SIMD group anyway, so a step that tests a triangle
          * and visits a node costs what one doing either costs. */
         if (tri != NO_TRI) {
-            uvec4 t = texelFetch(trace_tris, int(tri));
-            vec3 v0 = uintBitsToFloat(texelFetch(trace_verts, int(t.x)).xyz);
-            vec3 v1 = uintBitsToFloat(texelFetch(trace_verts, int(t.y)).xyz);
-            vec3 v2 = uintBitsToFloat(texelFetch(trace_verts, int(t.z)).xyz);
-            test_triangle_data(r, tri, vkrt_gpu_tri(v0, t.w & ~VKRT_TRACE_TRI_LAST, v1, 0u, v2, 0u, vec3(0.0), 0u), best);
-            tri = (t.w & VKRT_TRACE_TRI_LAST) != 0u ? NO_TRI : tri + 1u;
+            bool last;
+            test_triangle_data(r, tri, load_wide_tri(tri, last), best);
+            tri = last ? NO_TRI : tri + 1u;
             /* An occlusion query is answered by the first hit. */
             if (ANYHIT != 0u && best.prim != NO_PRIM) {
                 if (!WIDE_REFILL) break;

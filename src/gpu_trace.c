@@ -356,12 +356,11 @@ static vkrt_result create_descriptors(vk_context *vk, const gpu_scene *scene, Vk
                                       render_objects *o)
 {
     VkDescriptorPoolSize sizes[] = {
-        { VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, VKRT_BINDING_COUNT - 2 - VKRT_BINDING_TEXEL_COUNT }, /* all but: */
+        { VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, VKRT_BINDING_COUNT - 1 - VKRT_BINDING_TEXEL_COUNT }, /* all but: */
         { VK_DESCRIPTOR_TYPE_STORAGE_IMAGE, 1 },
-        { VK_DESCRIPTOR_TYPE_UNIFORM_TEXEL_BUFFER, VKRT_BINDING_TEXEL_COUNT },
-        { VK_DESCRIPTOR_TYPE_STORAGE_TEXEL_BUFFER, 1 },
+        { VK_DESCRIPTOR_TYPE_STORAGE_TEXEL_BUFFER, VKRT_BINDING_TEXEL_COUNT },
     };
-    vkrt_result r = vk_descriptor_set_create(vk, layout, sizes, 4, &o->pool, &o->set);
+    vkrt_result r = vk_descriptor_set_create(vk, layout, sizes, 3, &o->pool, &o->set);
     if (r != VKRT_OK) return r;
     /* Every storage buffer whole, at its binding; then the image. */
     const struct {
@@ -377,10 +376,10 @@ static vkrt_result create_descriptors(vk_context *vk, const gpu_scene *scene, Vk
         { VKRT_BINDING_PIECES, scene->pieces.buffer },
     };
     enum { BUFFERS = sizeof buffers / sizeof buffers[0] };
-    _Static_assert(BUFFERS == VKRT_BINDING_COUNT - 2 - VKRT_BINDING_TEXEL_COUNT,
+    _Static_assert(BUFFERS == VKRT_BINDING_COUNT - 1 - VKRT_BINDING_TEXEL_COUNT,
                    "every binding but the image and the texel buffers has a buffer here");
     VkDescriptorBufferInfo infos[BUFFERS];
-    VkWriteDescriptorSet writes[BUFFERS + 1 + VKRT_BINDING_TEXEL_COUNT + 1];
+    VkWriteDescriptorSet writes[BUFFERS + 1 + VKRT_BINDING_TEXEL_COUNT];
     for (uint32_t i = 0; i < BUFFERS; i++) {
         infos[i] = (VkDescriptorBufferInfo){ buffers[i].buffer, 0, VK_WHOLE_SIZE };
         writes[i] = (VkWriteDescriptorSet){ .sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET, .dstSet = o->set,
@@ -392,25 +391,21 @@ static vkrt_result create_descriptors(vk_context *vk, const gpu_scene *scene, Vk
                                               .dstBinding = VKRT_BINDING_IMAGE, .descriptorCount = 1,
                                               .descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_IMAGE, .pImageInfo = &image };
     const VkBufferView texels[VKRT_BINDING_TEXEL_COUNT] = { scene->wide_nodes.view, scene->trace_tris.view,
-                                                            scene->trace_verts.view, o->ray_texels };
+                                                            scene->trace_verts.view, o->ray_texels, o->hit_texels };
     for (uint32_t i = 0; i < VKRT_BINDING_TEXEL_COUNT; i++)
         writes[BUFFERS + 1 + i] = (VkWriteDescriptorSet){ .sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET,
                                                           .dstSet = o->set,
-                                                          .dstBinding = VKRT_BINDING_WIDE_NODES + i,
+                                                          .dstBinding = VKRT_BINDING_TEXEL_FIRST + i,
                                                           .descriptorCount = 1,
-                                                          .descriptorType = VK_DESCRIPTOR_TYPE_UNIFORM_TEXEL_BUFFER,
+                                                          .descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_TEXEL_BUFFER,
                                                           .pTexelBufferView = &texels[i] };
-    writes[BUFFERS + 1 + VKRT_BINDING_TEXEL_COUNT] =
-        (VkWriteDescriptorSet){ .sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET, .dstSet = o->set,
-                                .dstBinding = VKRT_BINDING_HIT_TEXELS, .descriptorCount = 1,
-                                .descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_TEXEL_BUFFER,
-                                .pTexelBufferView = &o->hit_texels };
-    _Static_assert(VKRT_BINDING_TRACE_TRIS == VKRT_BINDING_WIDE_NODES + 1 &&
-                       VKRT_BINDING_TRACE_VERTS == VKRT_BINDING_WIDE_NODES + 2 &&
-                       VKRT_BINDING_RAY_TEXELS == VKRT_BINDING_WIDE_NODES + 3 &&
-                       VKRT_BINDING_WIDE_NODES + VKRT_BINDING_TEXEL_COUNT == VKRT_BINDING_HIT_TEXELS &&
-                       VKRT_BINDING_HIT_TEXELS + 1 == VKRT_BINDING_COUNT,
-                   "the uniform texel buffers' bindings are adjacent, then the storage texel buffer, the last");
+    _Static_assert(VKRT_BINDING_WIDE_NODES == VKRT_BINDING_TEXEL_FIRST &&
+                       VKRT_BINDING_TRACE_TRIS == VKRT_BINDING_TEXEL_FIRST + 1 &&
+                       VKRT_BINDING_TRACE_VERTS == VKRT_BINDING_TEXEL_FIRST + 2 &&
+                       VKRT_BINDING_RAY_TEXELS == VKRT_BINDING_TEXEL_FIRST + 3 &&
+                       VKRT_BINDING_HIT_TEXELS == VKRT_BINDING_TEXEL_FIRST + 4 &&
+                       VKRT_BINDING_TEXEL_FIRST + VKRT_BINDING_TEXEL_COUNT == VKRT_BINDING_COUNT,
+                   "the texel buffers' bindings are adjacent, and the last");
     vkUpdateDescriptorSets(vk->device, sizeof writes / sizeof writes[0], writes, 0, NULL);
     return VKRT_OK;
 }
@@ -438,7 +433,7 @@ static vkrt_result create_render_objects(vk_context *vk, const gpu_scene *scene,
                              VK_MEMORY_DEVICE, "vkrt hits", &o->hits);
     if (r == VKRT_OK)
         r = vk_buffer_create(vk, (VkDeviceSize)(ray_count ? ray_count : 1) * sizeof(vkrt_gpu_ray),
-                             VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_UNIFORM_TEXEL_BUFFER_BIT |
+                             VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_STORAGE_TEXEL_BUFFER_BIT |
                                  VK_BUFFER_USAGE_TRANSFER_DST_BIT,
                              VK_MEMORY_DEVICE, "vkrt rays", &o->rays);
     /* The same memory seen as texels: the wide traversal reads rays and writes hits through
@@ -496,8 +491,8 @@ static uint32_t ray_groups(const gpu_scene *scene, bool naive, uint32_t rays)
 }
 
 /* The continuation slots a budgeted pass over `rays` rays needs: one an invocation (the
- * slot trace_buffer_ray and trace_buffer_rays_wide use), so the wide traversal needs an
- * eighth of the memory. */
+ * slot trace_buffer_ray and trace_buffer_rays_wide use), so the wide traversal needs a
+ * VKRT_WIDE_RAYS_PER_LANE-th of the memory. */
 static uint32_t ray_resume_slots(const gpu_scene *scene, bool naive, uint32_t rays)
 {
     return wide_traversal(scene, naive) ? ray_groups(scene, naive, rays) * VKRT_TRACE_GROUP_SIZE : rays;

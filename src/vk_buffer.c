@@ -194,7 +194,7 @@ vkrt_result vk_texel_buffer_create(vk_context *vk, const uint32_t *data, uint32_
     memset(out, 0, sizeof *out);
     const uint32_t zero[4] = { 0 };
     const VkDeviceSize bytes = (VkDeviceSize)(texels ? texels : 1) * sizeof zero;
-    vkrt_result r = vk_buffer_create(vk, bytes, VK_BUFFER_USAGE_UNIFORM_TEXEL_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT,
+    vkrt_result r = vk_buffer_create(vk, bytes, VK_BUFFER_USAGE_STORAGE_TEXEL_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT,
                                      VK_MEMORY_DEVICE, label, &out->buffer);
     if (r == VKRT_OK) r = vk_buffer_upload(vk, &out->buffer, texels ? (const void *)data : zero, bytes);
     if (r != VKRT_OK) {

@@ -27,8 +27,8 @@ void vk_buffer_destroy(vk_context *vk, vk_buffer *b);
  * needs vk->buffer_address). */
 VkDeviceAddress vk_buffer_address(vk_context *vk, const vk_buffer *b);
 
-/* A read-only uniform texel buffer of RGBA32UI texels and its view (the wide traversal's
- * arrays: texel fetches are lavapipe's fastest reads). `texels` of 0 makes a one-texel
+/* A storage texel buffer of RGBA32UI texels, read only, and its view (the wide traversal's
+ * arrays: texel reads are lavapipe's fastest). `texels` of 0 makes a one-texel
  * placeholder for a binding the variant never reads. */
 typedef struct vk_texel_buffer {
     vk_buffer buffer;

@@ -84,24 +84,20 @@ done:
     return r;
 }
 
-/* One set of `count` bindings, storage buffers but `image_binding` (UINT32_MAX: none) and
- * the bindings from `texel_first` on (uniform texel buffers), and a pipeline layout with the
- * push constants. */
-/* Bindings 0 .. count - 1: the storage image at image_binding, the storage texel buffer at
- * storage_texel, uniform texel buffers from texel_first on, storage buffers the rest
- * (UINT32_MAX: none of that kind). */
-static vkrt_result create_layout_pair(vk_context *vk, uint32_t count, uint32_t image_binding, uint32_t storage_texel,
-                                      uint32_t texel_first, VkDescriptorSetLayout *out_set,
+/* A set of bindings 0 .. count - 1: the storage image at image_binding, storage texel buffers
+ * from texel_first on, storage buffers the rest (UINT32_MAX: none of that kind); and a
+ * pipeline layout with the push constants. */
+static vkrt_result create_layout_pair(vk_context *vk, uint32_t count, uint32_t image_binding, uint32_t texel_first,
+                                      VkDescriptorSetLayout *out_set,
                                       VkPipelineLayout *out_layout)
 {
     VkDescriptorSetLayoutBinding bindings[VKRT_BINDING_COUNT > VKRT_SHADE_BINDING_COUNT ? VKRT_BINDING_COUNT
                                                                                          : VKRT_SHADE_BINDING_COUNT];
     for (uint32_t i = 0; i < count; i++)
         bindings[i] = (VkDescriptorSetLayoutBinding){ i,
-                                                      i == image_binding   ? VK_DESCRIPTOR_TYPE_STORAGE_IMAGE
-                                                      : i == storage_texel ? VK_DESCRIPTOR_TYPE_STORAGE_TEXEL_BUFFER
-                                                      : i >= texel_first   ? VK_DESCRIPTOR_TYPE_UNIFORM_TEXEL_BUFFER
-                                                                           : VK_DESCRIPTOR_TYPE_STORAGE_BUFFER,
+                                                      i == image_binding  ? VK_DESCRIPTOR_TYPE_STORAGE_IMAGE
+                                                      : i >= texel_first  ? VK_DESCRIPTOR_TYPE_STORAGE_TEXEL_BUFFER
+                                                                          : VK_DESCRIPTOR_TYPE_STORAGE_BUFFER,
                                                       1, VK_SHADER_STAGE_COMPUTE_BIT, NULL };
     VkDescriptorSetLayoutCreateInfo set_info = {
         .sType = VK_STRUCTURE_TYPE_DESCRIPTOR_SET_LAYOUT_CREATE_INFO,
@@ -125,8 +121,8 @@ static vkrt_result create_layout_pair(vk_context *vk, uint32_t count, uint32_t i
 
 static vkrt_result create_layouts(vk_context *vk, vk_pipelines *p)
 {
-    return create_layout_pair(vk, VKRT_BINDING_COUNT, VKRT_BINDING_IMAGE, VKRT_BINDING_HIT_TEXELS,
-                              VKRT_BINDING_WIDE_NODES, &p->set_layout, &p->layout);
+    return create_layout_pair(vk, VKRT_BINDING_COUNT, VKRT_BINDING_IMAGE, VKRT_BINDING_TEXEL_FIRST, &p->set_layout,
+                              &p->layout);
 }
 
 /* A shader with "#define VKRT_HAS_FLOAT64" and "#define VKRT_HAS_BUFFER_ADDRESS" after its
@@ -282,7 +278,7 @@ vkrt_result vk_shade_pipeline_get(vk_context *vk, vk_shade_variant variant, vk_t
     vk_pipelines *p = vk->pipelines;
     if (!p->shade_module) {
         if (!p->shade_layout &&
-            (r = create_layout_pair(vk, VKRT_SHADE_BINDING_COUNT, UINT32_MAX, UINT32_MAX, UINT32_MAX, &p->shade_set_layout,
+            (r = create_layout_pair(vk, VKRT_SHADE_BINDING_COUNT, UINT32_MAX, UINT32_MAX, &p->shade_set_layout,
                                     &p->shade_layout)) !=
                 VKRT_OK) {
             core_free(vk->core, words);
