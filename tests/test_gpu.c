@@ -630,6 +630,11 @@ static vkrt_scene *mesh_scene(vkrt_context *ctx, const float *pos, uint32_t vert
 }
 
 enum { FAN_TRIS = 100000, STACK_TRIS = 70000, LONG_RAYS = 48 };
+/* Rays down through the stacked leaf: a workgroup's worth and LONG_RAYS more, so that in the
+ * wide traversal (VKRT_WIDE_RAYS_PER_LANE rays an invocation, consecutive lanes taking
+ * consecutive rays) the first LONG_RAYS lanes go on to a second ray, and are saved and resumed
+ * within it: a continuation that must restore which of its rays a lane was on. */
+enum { STACK_RAYS = VKRT_TRACE_GROUP_SIZE + LONG_RAYS };
 
 /* FAN_TRIS triangles around the origin (the disc of radius 1 in z = 0): every box holds the
  * shared vertex, so a ray through it tests nearly every triangle. */
@@ -701,15 +706,17 @@ static void gpu_traversals_beyond_the_loop_limit_match_cpu(void)
     uint32_t *fan_idx, *stack_idx;
     make_fan(&fan_pos, &fan_idx);
     make_leaf_stack(&stack_pos, &stack_idx);
-    vkrt_ray fan_rays[LONG_RAYS], stack_rays[LONG_RAYS];
+    vkrt_ray fan_rays[LONG_RAYS], stack_rays[STACK_RAYS];
     test_rng rng = { 77 };
-    for (int i = 0; i < LONG_RAYS; i++) {
+    for (int i = 0; i < STACK_RAYS; i++) {
         double d[3];
         do rng_unit_vector(&rng, d);
         while (fabs(d[2]) < 0.2);
         /* dir = -origin exactly, so the ray passes through the vertex at t = 1. */
-        fan_rays[i] = (vkrt_ray){ .origin = { (float)(2 * d[0]), (float)(2 * d[1]), (float)(2 * d[2]) } };
-        for (int a = 0; a < 3; a++) fan_rays[i].dir[a] = -fan_rays[i].origin[a];
+        if (i < LONG_RAYS) {
+            fan_rays[i] = (vkrt_ray){ .origin = { (float)(2 * d[0]), (float)(2 * d[1]), (float)(2 * d[2]) } };
+            for (int a = 0; a < 3; a++) fan_rays[i].dir[a] = -fan_rays[i].origin[a];
+        }
         stack_rays[i] = (vkrt_ray){ .origin = { (float)(-0.45 + 0.4 * rng_uniform(&rng)), (float)(rng_uniform(&rng) - 0.5), 2 },
                                     .dir = { 0, 0, -1 } };
     }
@@ -738,7 +745,7 @@ static void gpu_traversals_beyond_the_loop_limit_match_cpu(void)
             CHECK_MSG(st.max_leaf_triangles == STACK_TRIS, "%s: largest leaf %u, not all %d triangles", name,
                       st.max_leaf_triangles, STACK_TRIS);
         snprintf(what, sizeof what, "one leaf of %d, %s", STACK_TRIS, name);
-        if (sg && sc) check_long_rays(sg, sc, VKRT_INTERSECTOR_WATERTIGHT, true, 0.0, stack_rays, LONG_RAYS, what);
+        if (sg && sc) check_long_rays(sg, sc, VKRT_INTERSECTOR_WATERTIGHT, true, 0.0, stack_rays, STACK_RAYS, what);
         vkrt_scene_destroy(sg);
         vkrt_scene_destroy(sc);
     }
