@@ -88,8 +88,7 @@ done:
  * from texel_first on, storage buffers the rest (UINT32_MAX: none of that kind); and a
  * pipeline layout with the push constants. */
 static vkrt_result create_layout_pair(vk_context *vk, uint32_t count, uint32_t image_binding, uint32_t texel_first,
-                                      VkDescriptorSetLayout *out_set,
-                                      VkPipelineLayout *out_layout)
+                                      VkDescriptorSetLayout *out_set, VkPipelineLayout *out_layout)
 {
     VkDescriptorSetLayoutBinding bindings[VKRT_BINDING_COUNT > VKRT_SHADE_BINDING_COUNT ? VKRT_BINDING_COUNT
                                                                                          : VKRT_SHADE_BINDING_COUNT];
@@ -279,8 +278,7 @@ vkrt_result vk_shade_pipeline_get(vk_context *vk, vk_shade_variant variant, vk_t
     if (!p->shade_module) {
         if (!p->shade_layout &&
             (r = create_layout_pair(vk, VKRT_SHADE_BINDING_COUNT, UINT32_MAX, UINT32_MAX, &p->shade_set_layout,
-                                    &p->shade_layout)) !=
-                VKRT_OK) {
+                                    &p->shade_layout)) != VKRT_OK) {
             core_free(vk->core, words);
             return r;
         }

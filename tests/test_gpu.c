@@ -524,8 +524,8 @@ static void gpu_trace_rays_match_cpu_and_naive(void)
 
 /* The wide BVH through texel buffers (the default wherever a scene fits one buffer per array)
  * against the binary BVH it was collapsed from (the test knob keeps a scene to it): the same
- * closest hits bit for bit, ray arrays (VKRT_WIDE_RAYS_PER_LANE rays per invocation, more than one submission)
- * and renders alike, and any-hit queries hit where the binary traversal's do. */
+ * closest hits bit for bit, ray arrays (VKRT_WIDE_RAYS_PER_LANE rays per invocation, more than
+ * one submission) and renders alike, and any-hit queries hit where the binary traversal's do. */
 static void gpu_wide_traversal_matches_the_binary_one(void)
 {
     const char *path = VKRT_MODELS_DIR "/meshes/dragon_48k.obj";
