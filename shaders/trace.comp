@@ -87,7 +87,8 @@ layout(set = 0, binding = VKRT_BINDING_WIDE_NODES, rgba32ui) readonly uniform ui
 layout(set = 0, binding = VKRT_BINDING_TRACE_TRIS, rgba32ui) readonly uniform uimageBuffer trace_tris;
 layout(set = 0, binding = VKRT_BINDING_TRACE_VERTS, rgba32ui) readonly uniform uimageBuffer trace_verts;
 layout(set = 0, binding = VKRT_BINDING_RAY_TEXELS, rgba32ui) readonly uniform uimageBuffer ray_texels;
-layout(set = 0, binding = VKRT_BINDING_HIT_TEXELS, rgba32ui) uniform uimageBuffer hit_texels;
+/* A word a texel, so that the traversal can write a hit's triangle word alone. */
+layout(set = 0, binding = VKRT_BINDING_HIT_WORDS, r32ui) uniform uimageBuffer hit_words;
 /* A split scene's piece addresses (a placeholder otherwise): the nodes, triangles and surfaces
  * bindings then hold only the first piece of each. */
 layout(set = 0, binding = VKRT_BINDING_PIECES, std430) readonly buffer Pieces {
@@ -261,9 +262,9 @@ bool trace_bvh(ray r, uint slot, inout hit best, inout heat_counts heat)
     return true;
 }
 
-/* The wide traversal's rays come from the ray buffer; a hit is stored as it ends, naming the
- * triangle array index (the wavefront's form; trace_buffer_rays_wide turns the buffer
- * variant's into vkrt_hit afterwards). */
+/* The wide traversal's rays come from the ray buffer. Its hits go to the hit buffer in two
+ * passes: the traversal records each ray's triangle (store_wide_hit_tri), and once the
+ * invocation's rays are all done trace_buffer_rays_wide writes the whole hit. */
 vkrt_gpu_ray load_wide_ray_fields(uint index)
 {
     vec4 a = uintBitsToFloat(imageLoad(ray_texels, int(2u * index)));
@@ -288,21 +289,27 @@ vkrt_gpu_tri load_wide_tri(uint tri, out bool last)
     return vkrt_gpu_tri(v0, t.w & ~VKRT_TRACE_TRI_LAST, v1, 0u, v2, 0u, vec3(0.0), 0u);
 }
 
-void store_wide_hit_texel(uint index, vkrt_gpu_hit h)
+/* Ray `index`'s closest triangle so far (NO_PRIM: none), in the triangle word of its hit: a
+ * single word, which the traversal stores every step (see trace_wide). */
+const uint HIT_TRI_WORD = 1u;
+
+void store_wide_hit_tri(uint index, hit best)
 {
-    imageStore(hit_texels, int(index), uvec4(floatBitsToUint(h.t), h.tri, floatBitsToUint(h.u), floatBitsToUint(h.v)));
+    imageStore(hit_words, int(4u * index + HIT_TRI_WORD), uvec4(best.prim != NO_PRIM ? best.tri : NO_PRIM));
 }
 
-vkrt_gpu_hit load_wide_hit_texel(uint index)
+uint load_wide_hit_tri(uint index)
 {
-    uvec4 h = imageLoad(hit_texels, int(index));
-    return vkrt_gpu_hit(uintBitsToFloat(h.x), h.y, uintBitsToFloat(h.z), uintBitsToFloat(h.w));
+    return imageLoad(hit_words, int(4u * index + HIT_TRI_WORD)).x;
 }
 
-void store_wide_hit(uint index, hit best)
+void store_wide_hit(uint index, vkrt_gpu_hit h)
 {
-    store_wide_hit_texel(index, best.prim != NO_PRIM ? vkrt_gpu_hit(best.t, best.tri, best.u, best.v)
-                                                     : vkrt_gpu_hit(-1.0, NO_PRIM, 0.0, 0.0));
+    int word = int(4u * index);
+    imageStore(hit_words, word, uvec4(floatBitsToUint(h.t)));
+    imageStore(hit_words, word + 1, uvec4(h.tri));
+    imageStore(hit_words, word + 2, uvec4(floatBitsToUint(h.u)));
+    imageStore(hit_words, word + 3, uvec4(floatBitsToUint(h.v)));
 }
 
 #include "traverse_wide.glsl"
@@ -454,9 +461,11 @@ void trace_buffer_ray()
                                        : vkrt_gpu_hit(-1.0, NO_PRIM, 0.0, 0.0);
 }
 
-/* vkrt_trace_rays and the wavefront through the wide BVH: WIDE_RAYS rays per invocation. The
- * buffer variant's hits become vkrt_hit once all of the invocation's rays are done: prim_id
- * instead of the triangle, the distance refined. */
+/* vkrt_trace_rays and the wavefront through the wide BVH: WIDE_RAYS rays per invocation. Once
+ * all of the invocation's rays are done, each hit's distance and barycentrics come from testing
+ * the triangle the traversal recorded again (the same function on the same ray and triangle,
+ * so the same bits); the buffer variant's hits become vkrt_hit: prim_id instead of the
+ * triangle, the distance refined. */
 void trace_buffer_rays_wide()
 {
     uint slot = gl_WorkGroupID.x * VKRT_TRACE_GROUP_SIZE + gl_LocalInvocationIndex;
@@ -465,22 +474,31 @@ void trace_buffer_rays_wide()
     ray r;
     bool valid = load_wide_ray(first, r);
     hit best = hit(r.tmax, 0.0, 0.0, NO_PRIM, NO_PRIM);
-    if (!trace_wide(r, valid, slot, 0u, best) || RAYGEN != VKRT_GPU_RAYGEN_BUFFER) return;
+    if (!trace_wide(r, valid, slot, 0u, best)) return;
     for (uint k = 0u; k < WIDE_RAYS; k++) {
         uint index = wide_ray_index(k);
         if (index >= p.tile_width) break;
-        vkrt_gpu_hit h = load_wide_hit_texel(index);
-        if (h.tri == NO_PRIM) continue;
-        /* finish_ray_hit's refinement, from the wide arrays: lavapipe reads the triangle array
-         * (a storage buffer) a lane and a word at a time, 8% of a primary-ray trace. */
-        bool last;
-        vkrt_gpu_tri tri = load_wide_tri(h.tri, last);
+        uint tri_index = load_wide_hit_tri(index);
+        vkrt_gpu_hit h = vkrt_gpu_hit(-1.0, NO_PRIM, 0.0, 0.0);
+        if (tri_index != NO_PRIM) {
+            /* From the wide arrays: lavapipe reads the triangle array (a storage buffer) a lane
+             * and a word at a time, 8% of a primary-ray trace. */
+            bool last;
+            vkrt_gpu_tri tri = load_wide_tri(tri_index, last);
+            load_wide_ray(index, r);
+            hit again = hit(r.tmax, 0.0, 0.0, NO_PRIM, NO_PRIM);
+            test_triangle_data(r, tri_index, tri, again);
+            h = vkrt_gpu_hit(again.t, RAYGEN == VKRT_GPU_RAYGEN_BUFFER ? tri.prim_id : tri_index, again.u, again.v);
 #ifdef VKRT_HAS_FLOAT64
-        vkrt_gpu_ray g = load_wide_ray_fields(index);
-        h.t = refine_hit_distance(dvec3(g.origin), dvec3(g.dir), double(g.tmin),
-                                  double(g.tmax == 0.0 ? T_INFINITY : g.tmax), tri, h.t);
+            /* finish_ray_hit's refinement. */
+            if (RAYGEN == VKRT_GPU_RAYGEN_BUFFER) {
+                vkrt_gpu_ray g = load_wide_ray_fields(index);
+                h.t = refine_hit_distance(dvec3(g.origin), dvec3(g.dir), double(g.tmin),
+                                          double(g.tmax == 0.0 ? T_INFINITY : g.tmax), tri, h.t);
+            }
 #endif
-        store_wide_hit_texel(index, vkrt_gpu_hit(h.t, tri.prim_id, h.u, h.v));
+        }
+        store_wide_hit(index, h);
     }
 }
 

@@ -13,7 +13,7 @@
  * reached it), budgeted in the same way (VKRT_SPEC_BUDGET) with the same continuation state.
  *
  * Included by trace.comp after test_triangle_data, mark_finished, load_wide_ray, load_wide_tri
- * and store_wide_hit. */
+ * and store_wide_hit_tri. */
 #ifndef VKRT_TRAVERSE_WIDE_GLSL
 #define VKRT_TRAVERSE_WIDE_GLSL
 
@@ -127,7 +127,7 @@ uint wide_ray_index(uint k)
 
 /* The closest (or, ANYHIT, any) hit of r, as trace_bvh finds it; with WIDE_RAYS > 1 the hits of
  * this invocation's rays from its k-th on (r is that one, `valid` whether it may hit anything),
- * each stored by store_wide_hit as it ends. Returns false where the budget stopped it (the
+ * each ray's triangle stored by store_wide_hit_tri. Returns false where the budget stopped it (the
  * state is then in `slot`). */
 bool trace_wide(ray r, bool valid, uint slot, uint k, inout hit best)
 {
@@ -166,10 +166,15 @@ bool trace_wide(ray r, bool valid, uint slot, uint k, inout hit best)
             }
             steps++;
         }
+        /* The ray's closest triangle so far, stored by every lane in every step, not by the
+         * lanes whose ray has just ended: lavapipe stores a lane at a time, branching on each
+         * lane's bit of the mask, and a mask that changes from step to step mispredicts those
+         * branches (5% of a primary-ray trace's time). A ray's last store is the one made in
+         * the step that finds it done, below. */
+        if (WIDE_REFILL) store_wide_hit_tri(wide_ray_index(k), best);
         if (node == NO_NODE && tri == NO_TRI && sp == 0u && held == NO_NODE) {
             if (!WIDE_REFILL) break;
             /* This ray is done: the lane takes its next one, and visits its root below. */
-            store_wide_hit(wide_ray_index(k), best);
             k++;
             uint index = wide_ray_index(k);
             if (k == WIDE_RAYS || index >= p.tile_width) break;

@@ -110,11 +110,11 @@ static vkrt_result upload_wide(vk_context *vk, const bvh *b, const vkrt_gpu_tri 
     out->wide_pack_ms = core_now_ms() - t0;
     if (r != VKRT_OK) return r;
     const uint64_t texel_limit = vk->properties.limits.maxTexelBufferElements;
-    /* The wide traversal also reads a chunk's rays (two texels each) and writes its hits (one)
-     * through texel views of the ray and hit buffers. */
+    /* The wide traversal also reads a chunk's rays (two texels each) and writes its hits (four
+     * words each) through texel views of the ray and hit buffers. */
     const bool usable = w.node_count && wide_traversal_fits(w.depth, w.tri_count) &&
                         (uint64_t)w.node_count * VKRT_WIDE_NODE_TEXELS <= texel_limit && w.tri_count <= texel_limit &&
-                        w.vertex_count <= texel_limit && 2ull * VKRT_RAY_CHUNK <= texel_limit;
+                        w.vertex_count <= texel_limit && 4ull * VKRT_RAY_CHUNK <= texel_limit;
     r = vk_texel_buffer_create(vk, w.node_texels, usable ? w.node_count * VKRT_WIDE_NODE_TEXELS : 0, "vkrt wide BVH",
                                &out->wide_nodes);
     if (r == VKRT_OK)
@@ -275,7 +275,7 @@ typedef struct render_objects {
     vk_buffer readback;
     vk_buffer hits;
     vk_buffer rays;
-    VkBufferView hit_texels, ray_texels; /* RGBA32UI views of hits and rays (the wide traversal's) */
+    VkBufferView hit_words, ray_texels; /* the wide traversal's views: R32UI of hits, RGBA32UI of rays */
     vk_buffer resume;
     vk_buffer resume_stack;
     vk_buffer unfinished; /* host-visible: read after every submission */
@@ -292,7 +292,7 @@ static void render_objects_destroy(vk_context *vk, render_objects *o)
     if (o->view) vkDestroyImageView(vk->device, o->view, NULL);
     if (o->image) vkDestroyImage(vk->device, o->image, NULL);
     vk_memory_free(vk, o->image_memory, &o->image_allocation);
-    if (o->hit_texels) vkDestroyBufferView(vk->device, o->hit_texels, NULL);
+    if (o->hit_words) vkDestroyBufferView(vk->device, o->hit_words, NULL);
     if (o->ray_texels) vkDestroyBufferView(vk->device, o->ray_texels, NULL);
     vk_buffer_destroy(vk, &o->readback);
     vk_buffer_destroy(vk, &o->hits);
@@ -391,7 +391,7 @@ static vkrt_result create_descriptors(vk_context *vk, const gpu_scene *scene, Vk
                                               .dstBinding = VKRT_BINDING_IMAGE, .descriptorCount = 1,
                                               .descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_IMAGE, .pImageInfo = &image };
     const VkBufferView texels[VKRT_BINDING_TEXEL_COUNT] = { scene->wide_nodes.view, scene->trace_tris.view,
-                                                            scene->trace_verts.view, o->ray_texels, o->hit_texels };
+                                                            scene->trace_verts.view, o->ray_texels, o->hit_words };
     for (uint32_t i = 0; i < VKRT_BINDING_TEXEL_COUNT; i++)
         writes[BUFFERS + 1 + i] = (VkWriteDescriptorSet){ .sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET,
                                                           .dstSet = o->set,
@@ -403,7 +403,7 @@ static vkrt_result create_descriptors(vk_context *vk, const gpu_scene *scene, Vk
                        VKRT_BINDING_TRACE_TRIS == VKRT_BINDING_TEXEL_FIRST + 1 &&
                        VKRT_BINDING_TRACE_VERTS == VKRT_BINDING_TEXEL_FIRST + 2 &&
                        VKRT_BINDING_RAY_TEXELS == VKRT_BINDING_TEXEL_FIRST + 3 &&
-                       VKRT_BINDING_HIT_TEXELS == VKRT_BINDING_TEXEL_FIRST + 4 &&
+                       VKRT_BINDING_HIT_WORDS == VKRT_BINDING_TEXEL_FIRST + 4 &&
                        VKRT_BINDING_TEXEL_FIRST + VKRT_BINDING_TEXEL_COUNT == VKRT_BINDING_COUNT,
                    "the texel buffers' bindings are adjacent, and the last");
     vkUpdateDescriptorSets(vk->device, sizeof writes / sizeof writes[0], writes, 0, NULL);
@@ -439,8 +439,9 @@ static vkrt_result create_render_objects(vk_context *vk, const gpu_scene *scene,
     /* The same memory seen as texels: the wide traversal reads rays and writes hits through
      * them (lavapipe's storage-buffer accesses go a lane and a word at a time). */
     _Static_assert(sizeof(vkrt_gpu_hit) == 16 && sizeof(vkrt_gpu_ray) == 32, "a hit is one texel, a ray two");
-    if (r == VKRT_OK) r = vk_buffer_view_create(vk, o->hits.buffer, o->hits.size, &o->hit_texels);
-    if (r == VKRT_OK) r = vk_buffer_view_create(vk, o->rays.buffer, o->rays.size, &o->ray_texels);
+    if (r == VKRT_OK) r = vk_buffer_view_create(vk, o->hits.buffer, o->hits.size, VK_FORMAT_R32_UINT, &o->hit_words);
+    if (r == VKRT_OK)
+        r = vk_buffer_view_create(vk, o->rays.buffer, o->rays.size, VK_FORMAT_R32G32B32A32_UINT, &o->ray_texels);
     const VkDeviceSize slots = resume_slots ? resume_slots : 1;
     if (r == VKRT_OK)
         r = vk_buffer_create(vk, slots * sizeof(vkrt_gpu_resume), VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, VK_MEMORY_DEVICE,

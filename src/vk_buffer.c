@@ -201,20 +201,22 @@ vkrt_result vk_texel_buffer_create(vk_context *vk, const uint32_t *data, uint32_
         vk_texel_buffer_destroy(vk, out);
         return r;
     }
-    if ((r = vk_buffer_view_create(vk, out->buffer.buffer, bytes, &out->view)) != VKRT_OK)
+    if ((r = vk_buffer_view_create(vk, out->buffer.buffer, bytes, VK_FORMAT_R32G32B32A32_UINT, &out->view)) != VKRT_OK)
         vk_texel_buffer_destroy(vk, out);
     return r;
 }
 
-vkrt_result vk_buffer_view_create(vk_context *vk, VkBuffer buffer, VkDeviceSize bytes, VkBufferView *out)
+vkrt_result vk_buffer_view_create(vk_context *vk, VkBuffer buffer, VkDeviceSize bytes, VkFormat format,
+                                  VkBufferView *out)
 {
     *out = VK_NULL_HANDLE;
-    const VkDeviceSize texel = 4 * sizeof(uint32_t), limit = (VkDeviceSize)vk->properties.limits.maxTexelBufferElements;
+    const VkDeviceSize texel = (format == VK_FORMAT_R32_UINT ? 1 : 4) * sizeof(uint32_t);
+    const VkDeviceSize limit = (VkDeviceSize)vk->properties.limits.maxTexelBufferElements;
     const VkDeviceSize texels = bytes / texel < limit ? bytes / texel : limit;
     VkBufferViewCreateInfo info = {
         .sType = VK_STRUCTURE_TYPE_BUFFER_VIEW_CREATE_INFO,
         .buffer = buffer,
-        .format = VK_FORMAT_R32G32B32A32_UINT,
+        .format = format,
         .range = (texels ? texels : 1) * texel,
     };
     VkResult res = vkCreateBufferView(vk->device, &info, NULL, out);

@@ -37,10 +37,11 @@ typedef struct vk_texel_buffer {
 
 vkrt_result vk_texel_buffer_create(vk_context *vk, const uint32_t *data, uint32_t texels, const char *label,
                                    vk_texel_buffer *out);
-/* An RGBA32UI view of the first `bytes` (at least 16) of buffer, created with a texel-buffer
- * usage: as many whole texels as they hold, at most the device's maxTexelBufferElements. Destroy
- * with vkDestroyBufferView. */
-vkrt_result vk_buffer_view_create(vk_context *vk, VkBuffer buffer, VkDeviceSize bytes, VkBufferView *out);
+/* A view of the first `bytes` of buffer, created with a texel-buffer usage, in `format`
+ * (VK_FORMAT_R32G32B32A32_UINT or VK_FORMAT_R32_UINT): as many whole texels as they hold (at
+ * least one), at most the device's maxTexelBufferElements. Destroy with vkDestroyBufferView. */
+vkrt_result vk_buffer_view_create(vk_context *vk, VkBuffer buffer, VkDeviceSize bytes, VkFormat format,
+                                  VkBufferView *out);
 void vk_texel_buffer_destroy(vk_context *vk, vk_texel_buffer *t);
 
 /* Fills a device buffer: a memcpy when it is mapped, else through a staging buffer. */
