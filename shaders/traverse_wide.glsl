@@ -68,16 +68,29 @@ vec4 dequantise(float origin, float scale, uint bytes)
     return v;
 }
 
-/* Tests the four child boxes of wide node `node`: returns how many the ray enters and, in
- * keys, their entry distances nearest first, each an order_key with the slot in its two low
- * bits (clearing those bits moves a distance towards -infinity, so the distance read back is
- * never beyond the box and prunes conservatively). Missed slots sort last. */
-uint visit_wide_node(ray r, uint node, float best_t, out uvec4 keys, out uvec4 children)
+/* A wide node's four texels: its frame, the quantised planes of its four child boxes, and
+ * their references (layout in vkrt_shared.h). */
+struct wide_node {
+    uvec4 frame;
+    uvec4 q_a;
+    uvec4 q_b;
+    uvec4 children;
+};
+
+wide_node load_wide_node(uint node)
 {
     int base = int(node * VKRT_WIDE_NODE_TEXELS);
-    uvec4 frame = imageLoad(wide_nodes, base), q_a = imageLoad(wide_nodes, base + 1);
-    uvec4 q_b = imageLoad(wide_nodes, base + 2);
-    children = imageLoad(wide_nodes, base + 3);
+    return wide_node(imageLoad(wide_nodes, base), imageLoad(wide_nodes, base + 1), imageLoad(wide_nodes, base + 2),
+                     imageLoad(wide_nodes, base + 3));
+}
+
+/* Tests the four child boxes of wide node n: returns how many the ray enters and, in keys,
+ * their entry distances nearest first, each an order_key with the slot in its two low bits
+ * (clearing those bits moves a distance towards -infinity, so the distance read back is never
+ * beyond the box and prunes conservatively). Missed slots sort last. */
+uint visit_wide_node(ray r, wide_node n, float best_t, out uvec4 keys)
+{
+    uvec4 frame = n.frame, q_a = n.q_a, q_b = n.q_b, children = n.children;
     vec3 origin = uintBitsToFloat(frame.xyz);
     vec3 scale = uintBitsToFloat(((uvec3(frame.w) >> uvec3(0u, 8u, 16u)) & 0xFFu) << 23u);
     vec4 lo_x = dequantise(origin.x, scale.x, q_a.x), lo_y = dequantise(origin.y, scale.y, q_a.y);
@@ -209,10 +222,16 @@ bool trace_wide(ray r, bool valid, uint slot, uint k, inout hit best)
         }
         /* Every step runs both stages where it has work for them: lavapipe executes the whole
          * loop body for all eight lanes of a SIMD group anyway, so a step that tests a triangle
-         * and visits a node costs what one doing either costs. */
+         * and visits a node costs what one doing either costs. Both stages' reads come first
+         * (node 0 and triangle 0 for an idle stage), so that the node's wait on memory overlaps
+         * the triangle's: read inside its stage, after the triangle test, the node was fetched
+         * only once the test's hundreds of instructions had passed through the CPU's reorder
+         * window. 5-9% less time on any-hit AO rays, the same on others (in-process A/B). */
+        wide_node visited = load_wide_node(node == NO_NODE ? 0u : node);
+        bool last;
+        vkrt_gpu_tri tested = load_wide_tri(tri == NO_TRI ? 0u : tri, last);
         if (tri != NO_TRI) {
-            bool last;
-            test_triangle_data(r, tri, load_wide_tri(tri, last), best);
+            test_triangle_data(r, tri, tested, best);
             tri = last ? NO_TRI : tri + 1u;
             /* An occlusion query is answered by the first hit. */
             if (ANYHIT != 0u && best.prim != NO_PRIM) {
@@ -224,8 +243,8 @@ bool trace_wide(ray r, bool valid, uint slot, uint k, inout hit best)
             }
         }
         if (node != NO_NODE) {
-            uvec4 keys, children;
-            uint entered = visit_wide_node(r, node, best.t, keys, children);
+            uvec4 keys, children = visited.children;
+            uint entered = visit_wide_node(r, visited, best.t, keys);
             node = NO_NODE;
             /* The farther children on the stack, farthest first; the nearest to a free stage,
              * or on top of them. Never full: the host keeps the wide BVH within a third of the
