@@ -80,6 +80,11 @@ bool bvh_build_progress(bvh_build_state *b, uint64_t placed)
     return report(b, (float)((double)placed / (double)b->tri_count));
 }
 
+bool bvh_build_poll(bvh_build_state *b)
+{
+    return !b->progress || report(b, (float)((double)b->placed / (double)b->tri_count));
+}
+
 void bvh_build_subtree_state(const bvh_build_state *b, uint32_t region, bvh_build_state *sub)
 {
     memset(sub, 0, offsetof(bvh_build_state, stack));

@@ -126,6 +126,11 @@ bool bvh_build_leaf(bvh_build_state *b, bvh_build_task *task);
  * once all are placed) when the build has a progress callback. Returns false when the callback
  * cancels; the build then ends at bvh_build_finish(). Calling thread only. */
 bool bvh_build_progress(bvh_build_state *b, uint64_t placed);
+/* Reports the progress so far again (b->placed of the triangles) when the build has a progress
+ * callback, for a phase that places none but takes long enough to want cancelling (the
+ * parallel SAH build's top levels). Returns false when the callback cancels. Calling thread
+ * only. */
+bool bvh_build_poll(bvh_build_state *b);
 /* Fills *sub for building one subtree of b, possibly on another thread: it shares b's nodes
  * and references, allocates child pairs from node `region` on, starts with an empty stack and
  * no deepest leaf, counts its own placed triangles and reports no progress. */

@@ -22,7 +22,9 @@
  *   of one thread building the same tree depth first (children adjacent, node 0 the root).
  *
  * Progress reports and the user's callback stay on the calling thread (work_pool.h); workers
- * poll for cancellation. Every allocation is made on the calling thread between the workers'
+ * poll for cancellation. The top levels place no triangle in a leaf; they report the progress
+ * as it stands (0) after each pass over a level's pieces, so that the callback can cancel
+ * there too. Every allocation is made on the calling thread between the workers'
  * jobs, and each can fail cleanly: the build then frees everything and returns
  * VKRT_ERROR_OUT_OF_MEMORY (the compacted node array excepted: without it the nodes are
  * moved down in place). */
@@ -294,7 +296,8 @@ static bool split_level(sah_job *j)
     return true;
 }
 
-/* Splits the top levels; every node left unsplit is added to j->subtrees. */
+/* Splits the top levels; every node left unsplit is added to j->subtrees. Returns false when
+ * out of memory; a cancel by the progress callback returns true with j->b->cancelled set. */
 static bool build_top(sah_job *j, const bvh_build_task *root)
 {
     j->level_count = 1;
@@ -324,9 +327,12 @@ static bool build_top(sah_job *j, const bvh_build_task *root)
         }
         if (!j->chunk_count) break;
         work_pool_run(j->pool, j->chunk_count, bin_chunk, NULL, j);
+        if (!bvh_build_poll(j->b)) return true;
         if (!decide_level(j)) return false;
         work_pool_run(j->pool, j->chunk_count, partition_chunk, NULL, j);
+        if (!bvh_build_poll(j->b)) return true;
         work_pool_run(j->pool, j->trade_count, trade_chunk, NULL, j);
+        if (!bvh_build_poll(j->b)) return true;
         if (!split_level(j)) return false;
         top_node *swap = j->level;
         j->level = j->next;
@@ -526,6 +532,10 @@ vkrt_result bvh_build_sah_parallel(bvh_build_state *b, const mesh *m, uint32_t m
         return VKRT_OK; /* b->cancelled: bvh_build_finish() reports it */
     }
     if (!build_top(&j, &task)) goto out_of_memory;
+    if (b->cancelled) {
+        job_free(&j);
+        return VKRT_OK;
+    }
 
     qsort(j.subtrees, j.subtree_count, sizeof *j.subtrees, by_size_then_first);
     bool finished = work_pool_run(j.pool, (uint32_t)j.subtree_count, build_subtree_item, report_progress, &j);

@@ -636,6 +636,7 @@ static void bvh_sah_respects_max_leaf_size(void)
 
 typedef struct progress_log {
     int calls, cancel_at; /* cancel_at: the call (1-based) that returns false; 0 never */
+    int zero_calls;       /* zero_calls_cb: calls before the first fraction above 0 */
     float last;
     bool in_order;
 } progress_log;
@@ -647,6 +648,13 @@ static bool progress_cb(void *user, const char *stage, float fraction)
     if (!(fraction >= p->last && fraction <= 1.0f) || !stage) p->in_order = false;
     p->last = fraction;
     return p->cancel_at == 0 || p->calls < p->cancel_at;
+}
+
+static bool zero_calls_cb(void *user, const char *stage, float fraction)
+{
+    progress_log *p = user;
+    if (fraction == 0.0f && p->last == 0.0f) p->zero_calls++;
+    return progress_cb(user, stage, fraction);
 }
 
 static void bvh_progress_runs_from_zero_to_one(void)
@@ -890,6 +898,33 @@ static void bvh_sah_parallel_out_of_memory_and_cancel_without_leak(void)
     CHECK_EQ_U64(k.allocs, k.frees);
 }
 
+/* The parallel build's top levels place no triangle in a leaf, and used to call the progress
+ * callback not once: a cancel waited for the first subtree. They now report the fraction so
+ * far (0) after each pass over a level, so a cancel takes effect before any subtree is built. */
+static void bvh_sah_parallel_top_levels_report_progress(void)
+{
+    core c;
+    core_init(&c, NULL, NULL, NULL);
+    mesh m = make_random(&c, PARALLEL_TEST_TRIS);
+    progress_log p = { .in_order = true };
+    bvh_build_desc desc = { .builder = VKRT_BVH_BUILDER_BINNED_SAH, .threads = 3, .progress = zero_calls_cb,
+                            .progress_user = &p };
+    bvh out;
+    CHECK(bvh_build(&c, &m, &desc, &out) == VKRT_OK);
+    bvh_destroy(&c, &out);
+    /* The start's report and at least one level's three passes (100,000 references split down
+     * to 8,192 take four levels). */
+    CHECK_MSG(p.zero_calls >= 4, "%d progress calls before the first triangle was placed", p.zero_calls);
+    CHECK(p.in_order && p.last == 1.0f);
+    progress_log q = { .cancel_at = 4, .in_order = true };
+    desc.progress = progress_cb;
+    desc.progress_user = &q;
+    CHECK(bvh_build(&c, &m, &desc, &out) == VKRT_ERROR_CANCELLED);
+    CHECK(out.nodes == NULL && q.calls == 4);
+    CHECK_MSG(q.last == 0.0f, "cancelled at fraction %g, after the top levels", q.last);
+    test_mesh_free(&c, &m);
+}
+
 /* The collapse makes one allocation: failing it is VKRT_ERROR_OUT_OF_MEMORY with *out zeroed
  * and nothing leaked; an empty tree is an invalid argument; destroy accepts NULL and zeroes. */
 static void bvh4_collapse_fails_cleanly(void)
@@ -1036,6 +1071,7 @@ int main(void)
     RUN(bvh_out_of_memory_at_every_allocation_without_leak);
     RUN(bvh_sah_is_identical_on_any_thread_count);
     RUN(bvh_sah_parallel_out_of_memory_and_cancel_without_leak);
+    RUN(bvh_sah_parallel_top_levels_report_progress);
     RUN(bvh_sah_builds_the_same_tree_when_threads_fail_to_start);
     RUN(bvh4_collapse_fails_cleanly);
     RUN(bvh_validate_reports_broken_trees);
