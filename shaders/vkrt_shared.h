@@ -171,9 +171,11 @@ typedef struct vkrt_float3 { float x, y, z; } vkrt_float3;
  * and save loops (VKRT_TRAVERSAL_STACK_SIZE each). Devices without the limit get 0. */
 #define VKRT_LAVAPIPE_BUDGET 32768u
 
-/* Ray mode with a budget: rays per submission, so the continuation buffers (64 bytes of
- * state plus VKRT_TRAVERSAL_STACK_SIZE 8-byte entries per ray, 36 MiB in all) stay well
- * under lavapipe's 128 MiB maxStorageBufferRange. A 256x256 tile has as many pixels. */
+/* Ray mode with a budget: rays per submission, so the continuation buffers stay well under
+ * lavapipe's 128 MiB maxStorageBufferRange where they are largest, with a slot per ray (the
+ * binary traversal's: 64 bytes of state plus VKRT_TRAVERSAL_STACK_SIZE 8-byte entries, 36 MiB
+ * in all; the wide traversal keeps a slot per invocation of VKRT_WIDE_RAYS_PER_LANE rays, a
+ * VKRT_WIDE_RAYS_PER_LANE-th of that). A 256x256 tile has as many pixels. */
 #define VKRT_RESUME_RAY_CHUNK 65536u
 
 /* Stages of shade.comp, in the order one sample of a tile runs them (vkrt_gpu_push.stage_arg

@@ -87,7 +87,7 @@ vkrt_result bench_scene_create(vkrt_context *ctx, bool gpu, const vkrt_scene_des
                                char *skipped, size_t skipped_size, char *error, size_t error_size)
 {
     vkrt_result r = vkrt_scene_create(ctx, desc, out_scene);
-    if (r == VKRT_ERROR_LIMIT && gpu) {
+    if ((r == VKRT_ERROR_LIMIT || r == VKRT_ERROR_OUT_OF_DEVICE_MEMORY) && gpu) {
         snprintf(skipped, skipped_size, "the GPU backend was not run: %s", vkrt_context_last_error(ctx));
         return VKRT_OK;
     }

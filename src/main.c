@@ -131,6 +131,8 @@ static const char render_help[] =
     "  --no-normalize            keep world coordinates (default: scene scaled into [-0.5,0.5]^3)\n"
     "  --device N                Vulkan device N as listed by `vkrt devices` (default: the best)\n"
     "  --threads N               CPU backend and BVH build threads (default: one per core)\n"
+    "  --device-memory MIB       the most device memory the GPU backend may hold, in MiB\n"
+    "                            (default: the device's heaps)\n"
     "  --validation              enable the Vulkan validation layer; any message fails the run\n"
     "  --repeat N                render once to warm up (shader compilation), then N times, and\n"
     "                            report the median times\n"
@@ -194,7 +196,7 @@ static const char stress_help[] =
     "  --quick                   the reduced run of the test suite (seconds, not minutes)\n"
     "  --backend gpu|cpu         only that backend's rows (default: both)\n"
     "  --isect watertight|mt     only that intersector's rows (default: both)\n"
-    "  --device N, --threads N, --validation, -q, -v   as for render\n"
+    "  --device N, --device-memory MIB, --threads N, --validation, -q, -v   as for render\n"
     "\n"
     "examples:\n"
     "  vkrt stress                                   every case (under a minute on lavapipe)\n"
@@ -235,8 +237,8 @@ static const char bench_help[] =
     "  --ref-spp N               the references' samples per pixel (1024; quick: 256)\n"
     "  --cache DIR               where references are kept between runs, keyed by scene and\n"
     "                            settings (~/.cache/vkrt/bench; empty: nowhere)\n"
-    "  --eye, --target, --up, --fov, --no-normalize, --device N, --threads N, --validation, -q\n"
-    "                            as for render\n"
+    "  --eye, --target, --up, --fov, --no-normalize, --device N, --device-memory MIB,\n"
+    "  --threads N, --validation, -q   as for render\n"
     "\n"
     "examples:\n"
     "  vkrt bench                                    the built-in scene, every configuration\n"
@@ -500,6 +502,11 @@ static int parse_args(int argc, char **argv, options *o)
         } else if (!strcmp(arg, "--threads")) {
             NEED_VALUE();
             if (!parse_u32(value, &o->context.cpu_threads) || !o->context.cpu_threads) return usage_error("bad --threads '%s'", value);
+        } else if (!strcmp(arg, "--device-memory")) {
+            NEED_VALUE();
+            uint32_t mib;
+            if (!parse_u32(value, &mib) || !mib) return usage_error("bad --device-memory '%s' (MiB, at least 1)", value);
+            o->context.device_memory_limit = (uint64_t)mib << 20;
         } else if (!strcmp(arg, "--repeat")) {
             NEED_VALUE();
             if (!parse_u32(value, &o->repeat) || !o->repeat || o->repeat > 1000) return usage_error("bad --repeat '%s'", value);

@@ -397,6 +397,7 @@ vkrt_result vk_context_create(core *c, const vkrt_context_desc *desc, vk_context
     vk_context *vk = core_calloc_array(c, 1, sizeof *vk);
     if (!vk) return core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "out of memory creating the Vulkan context");
     vk->core = c;
+    vk->memory_budget = desc->device_memory_limit;
     vkrt_result r;
     if ((r = create_instance(vk, desc->validation)) != VKRT_OK) goto fail;
     if ((r = pick_device(vk, desc)) != VKRT_OK) goto fail;

@@ -39,6 +39,10 @@ typedef struct vk_context {
     VkCommandBuffer hung_commands;    /* buffer: freed at destruction, after the device is idle */
     VkDeviceSize memory_in_use;       /* device memory this context has allocated and not freed, */
     VkDeviceSize heap_in_use[VK_MAX_MEMORY_HEAPS]; /* in all and per memory heap */
+    VkDeviceSize memory_budget;       /* 0: none; else device memory allocations that would take
+                                         memory_in_use past this many bytes fail as out of device
+                                         memory, without asking the driver
+                                         (vkrt_context_desc.device_memory_limit; tests set it too) */
     struct vk_pipelines *pipelines;   /* compiled lazily, owned (vk_pipeline.c) */
     /* Test knobs: zero from vk_context_create, set by tests through this private header only. */
     VkDeviceSize scene_buffer_limit;  /* 0: the device's limits; else the most bytes one buffer of a
@@ -46,9 +50,6 @@ typedef struct vk_context {
                                          (at least 128: two triangles) */
     double submit_target_ms;          /* 0: GPU_SUBMIT_TARGET_MS; else the time each submission aims
                                          at (tiny: every submission as small as it can be) */
-    VkDeviceSize memory_budget;       /* 0: none; else device memory allocations that would take
-                                         memory_in_use past this many bytes fail as out of device
-                                         memory, without asking the driver */
     uint32_t fail_allocation;         /* 0: none; N: the Nth device memory allocation from now fails
                                          with VK_ERROR_OUT_OF_DEVICE_MEMORY (once) */
     uint32_t fail_submission;         /* 0: none; N: the Nth submission from now returns

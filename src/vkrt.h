@@ -108,6 +108,10 @@ typedef struct vkrt_context_desc {
                                         build a scene's BVH */
     const char *pipeline_cache_path; /* NULL (default): no cache on disk; else read at creation
                                         and written back at destruction (copied) */
+    uint64_t device_memory_limit;    /* 0 (default): the device's memory heaps; else the bytes of
+                                        device memory the GPU backend may hold at once: an
+                                        allocation past it fails with
+                                        VKRT_ERROR_OUT_OF_DEVICE_MEMORY, as past a heap */
 } vkrt_context_desc;
 
 typedef struct vkrt_context vkrt_context;

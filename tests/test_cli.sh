@@ -212,6 +212,31 @@ assert abs(int(rows[0]["triangles"]) - 2000) < 200 and all(int(r["mismatched_pix
 PY
 then ok "bench --procedural: about N triangles, named by the count, no mismatched pixel"
 else bad "bench --procedural: about N triangles, named by the count, no mismatched pixel"; fi
+# The GPU holds one builder's scene at a time: a million triangles take about 145 MB on the
+# device with the SAH BVH and 175 MB with the midpoint one, so 250 MiB hold either but not both
+# (two at once once overflowed lavapipe's 2 GiB heap at 1e7 triangles, and the bench failed).
+expect "bench --device-memory 250 holds one GPU scene at a time" 0 "$vkrt" bench --quick --procedural 1000000 \
+  --backend gpu --device-memory 250 --csv "$tmp/one_scene.csv"
+if python3 - "$tmp/one_scene.csv" <<'PY'
+import csv, sys
+rows = list(csv.DictReader(open(sys.argv[1])))
+gpu = {r["builder"] for r in rows if r["backend"] == "gpu"}
+assert gpu == {"sah", "midpoint"}, gpu
+PY
+then ok "bench --device-memory 250: both builders' GPU rows"
+else bad "bench --device-memory 250: both builders' GPU rows"; fi
+# A scene beyond the device's memory skips the GPU rows with a note; the CPU rows still run.
+expect "bench --device-memory 1 skips the GPU" 0 "$vkrt" bench --quick --procedural 20000 --device-memory 1 \
+  --csv "$tmp/no_gpu.csv"
+if grep -q "the GPU backend was not run: out of device memory" "$tmp/out" && ! grep -q ",gpu," "$tmp/no_gpu.csv" &&
+  grep -q ",cpu," "$tmp/no_gpu.csv"; then ok "bench --device-memory 1: a note, CPU rows only"
+else bad "bench --device-memory 1: a note, CPU rows only"; fi
+expect "render --device-memory 0 is a usage error" 2 "$vkrt" render --device-memory 0
+rm -f "$tmp/small.png"
+expect "render --device-memory 1 is out of device memory" 4 "$vkrt" render --device-memory 1 --size 16x16 -o "$tmp/small.png"
+if grep -q "out of device memory: .* 1048576-byte budget" "$tmp/err" && [ ! -e "$tmp/small.png" ]; then
+  ok "render --device-memory 1: says so, writes no image"
+else bad "render --device-memory 1: says so, writes no image"; fi
 expect "bench --procedural with a FILE is a usage error" 2 "$vkrt" bench "$models/meshes/bunny.obj" --procedural 2000
 expect "bench --modes with --compare is a usage error" 2 "$vkrt" bench --quick --modes --compare embree
 expect "bench --ref-spp 0 is a usage error" 2 "$vkrt" bench --quick --modes --ref-spp 0
