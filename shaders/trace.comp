@@ -265,16 +265,11 @@ bool trace_bvh(ray r, uint slot, inout hit best, inout heat_counts heat)
 /* The wide traversal's rays come from the ray buffer. Its hits go to the hit buffer in two
  * passes: the traversal records each ray's triangle (store_wide_hit_tri), and once the
  * invocation's rays are all done trace_buffer_rays_wide writes the whole hit. */
-vkrt_gpu_ray load_wide_ray_fields(uint index)
+bool load_wide_ray(uint index, out ray r)
 {
     vec4 a = uintBitsToFloat(imageLoad(ray_texels, int(2u * index)));
     vec4 b = uintBitsToFloat(imageLoad(ray_texels, int(2u * index + 1u)));
-    return vkrt_gpu_ray(a.xyz, a.w, b.xyz, b.w);
-}
-
-bool load_wide_ray(uint index, out ray r)
-{
-    return ray_from_buffer(load_wide_ray_fields(index), r);
+    return ray_from_buffer(vkrt_gpu_ray(a.xyz, a.w, b.xyz, b.w), r);
 }
 
 /* Triangle `tri` of the wide arrays as the wide traversal tests it: its corners and prim_id
@@ -490,12 +485,10 @@ void trace_buffer_rays_wide()
             test_triangle_data(r, tri_index, tri, again);
             h = vkrt_gpu_hit(again.t, RAYGEN == VKRT_GPU_RAYGEN_BUFFER ? tri.prim_id : tri_index, again.u, again.v);
 #ifdef VKRT_HAS_FLOAT64
-            /* finish_ray_hit's refinement. */
-            if (RAYGEN == VKRT_GPU_RAYGEN_BUFFER) {
-                vkrt_gpu_ray g = load_wide_ray_fields(index);
-                h.t = refine_hit_distance(dvec3(g.origin), dvec3(g.dir), double(g.tmin),
-                                          double(g.tmax == 0.0 ? T_INFINITY : g.tmax), tri, h.t);
-            }
+            /* finish_ray_hit's refinement, from the ray as read (r holds the buffer's origin,
+             * direction and bounds as given, tmax 0 as infinity). */
+            if (RAYGEN == VKRT_GPU_RAYGEN_BUFFER)
+                h.t = refine_hit_distance(dvec3(r.origin), dvec3(r.dir), double(r.tmin), double(r.tmax), tri, h.t);
 #endif
         }
         store_wide_hit(index, h);

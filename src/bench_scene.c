@@ -83,12 +83,13 @@ const char *bench_scene_name(const bench_scene *s)
     return s->label[0] ? s->label : s->o->input;
 }
 
-vkrt_result bench_scene_create(vkrt_context *ctx, bool gpu, const vkrt_scene_desc *desc, vkrt_scene **out_scene,
-                               char *skipped, size_t skipped_size, char *error, size_t error_size)
+vkrt_result bench_scene_create(vkrt_context *ctx, const char *gpu_rows, const vkrt_scene_desc *desc,
+                               vkrt_scene **out_scene, char *skipped, size_t skipped_size, char *error,
+                               size_t error_size)
 {
     vkrt_result r = vkrt_scene_create(ctx, desc, out_scene);
-    if ((r == VKRT_ERROR_LIMIT || r == VKRT_ERROR_OUT_OF_DEVICE_MEMORY) && gpu) {
-        snprintf(skipped, skipped_size, "the GPU backend was not run: %s", vkrt_context_last_error(ctx));
+    if ((r == VKRT_ERROR_LIMIT || r == VKRT_ERROR_OUT_OF_DEVICE_MEMORY) && gpu_rows) {
+        snprintf(skipped, skipped_size, "%s not run: %s", gpu_rows, vkrt_context_last_error(ctx));
         return VKRT_OK;
     }
     if (r != VKRT_OK) snprintf(error, error_size, "%s", vkrt_context_last_error(ctx));

@@ -24,12 +24,14 @@ vkrt_scene_desc bench_scene_desc(const bench_scene *s);
 const char *bench_scene_name(const bench_scene *s);
 void bench_scene_free(bench_scene *s);
 
-/* vkrt_scene_create of desc on ctx, where a scene beyond the GPU's limits (VKRT_ERROR_LIMIT:
- * lavapipe's storage buffers hold 128 MiB, about two million triangles) is not a failure of
- * the run: *out_scene is then NULL, the call returns VKRT_OK and skipped (skipped_size bytes)
- * says why, and the run goes on without that backend. Any other failure returns its code with
- * error saying what failed. */
-vkrt_result bench_scene_create(vkrt_context *ctx, bool gpu, const vkrt_scene_desc *desc, vkrt_scene **out_scene,
-                               char *skipped, size_t skipped_size, char *error, size_t error_size);
+/* vkrt_scene_create of desc on ctx. For a GPU scene (gpu_rows: what the run skips without it,
+ * "the GPU backend"; NULL for a CPU scene), one beyond the device (VKRT_ERROR_LIMIT: lavapipe's
+ * storage buffers hold 128 MiB, about two million triangles; VKRT_ERROR_OUT_OF_DEVICE_MEMORY)
+ * is not a failure of the run: *out_scene is then NULL, the call returns VKRT_OK and skipped
+ * (skipped_size bytes) says "<gpu_rows> not run: why", and the run goes on without those rows.
+ * Any other failure returns its code with error saying what failed. */
+vkrt_result bench_scene_create(vkrt_context *ctx, const char *gpu_rows, const vkrt_scene_desc *desc,
+                               vkrt_scene **out_scene, char *skipped, size_t skipped_size, char *error,
+                               size_t error_size);
 
 #endif
