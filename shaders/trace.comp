@@ -28,6 +28,7 @@ layout(constant_id = VKRT_SPEC_ANYHIT) const uint ANYHIT = 0u;
 layout(constant_id = VKRT_SPEC_TEXTURES) const uint TEXTURES = 0u;
 layout(constant_id = VKRT_SPEC_SPLIT) const uint SPLIT = 0u;
 layout(constant_id = VKRT_SPEC_WIDE) const uint WIDE = 0u;
+layout(constant_id = VKRT_SPEC_FINISH) const uint FINISH = 0u;
 
 layout(set = 0, binding = VKRT_BINDING_NODES, std430) readonly buffer Nodes {
     vkrt_gpu_node nodes[];
@@ -56,6 +57,7 @@ layout(set = 0, binding = VKRT_BINDING_RESUME_STACK, std430) buffer ResumeStack 
 };
 layout(set = 0, binding = VKRT_BINDING_UNFINISHED, std430) buffer Unfinished {
     uint unfinished;
+    uint next_slot; /* the wide traversal's next ray slot free (take_ray_slot) */
 };
 /* With COUNTERS: what each pixel's traversal did, summed by the host (render statistics). */
 layout(set = 0, binding = VKRT_BINDING_COUNTERS, std430) writeonly buffer Counters {
@@ -75,7 +77,7 @@ layout(set = 0, binding = VKRT_BINDING_TEXTURES, std430) readonly buffer Texture
 layout(set = 0, binding = VKRT_BINDING_TEXELS, std430) readonly buffer Texels {
     uvec2 texels[]; /* linear RGBA as halves: (R | G << 16, B | A << 16) */
 };
-/* With WIDE: the wide BVH, the triangles and their corners (placeholders otherwise), and the
+/* With WIDE: the wide BVH and its triangles (placeholders otherwise), and the
  * wide traversal's view of the rays and hits buffers (a ray two texels, a hit one). lavapipe
  * runs a storage-buffer access as a loop over the lanes with a bounds check per word, a texel
  * access as one gather; the ray refill is in every step of the wide traversal's loop, and
@@ -85,7 +87,6 @@ layout(set = 0, binding = VKRT_BINDING_TEXELS, std430) readonly buffer Texels {
  * 6.5% fewer instructions. */
 layout(set = 0, binding = VKRT_BINDING_WIDE_NODES, rgba32ui) readonly uniform uimageBuffer wide_nodes;
 layout(set = 0, binding = VKRT_BINDING_TRACE_TRIS, rgba32ui) readonly uniform uimageBuffer trace_tris;
-layout(set = 0, binding = VKRT_BINDING_TRACE_VERTS, rgba32ui) readonly uniform uimageBuffer trace_verts;
 layout(set = 0, binding = VKRT_BINDING_RAY_TEXELS, rgba32ui) readonly uniform uimageBuffer ray_texels;
 /* A word a texel, so that the traversal can write a hit's triangle word alone. */
 layout(set = 0, binding = VKRT_BINDING_HIT_WORDS, r32ui) uniform uimageBuffer hit_words;
@@ -276,12 +277,17 @@ bool load_wide_ray(uint index, out ray r)
  * (the shading fields are left zero). */
 vkrt_gpu_tri load_wide_tri(uint tri, out bool last)
 {
-    uvec4 t = imageLoad(trace_tris, int(tri));
-    vec3 v0 = uintBitsToFloat(imageLoad(trace_verts, int(t.x)).xyz);
-    vec3 v1 = uintBitsToFloat(imageLoad(trace_verts, int(t.y)).xyz);
-    vec3 v2 = uintBitsToFloat(imageLoad(trace_verts, int(t.z)).xyz);
-    last = (t.w & VKRT_TRACE_TRI_LAST) != 0u;
-    return vkrt_gpu_tri(v0, t.w & ~VKRT_TRACE_TRI_LAST, v1, 0u, v2, 0u, vec3(0.0), 0u);
+    int first = int(VKRT_WIDE_TRI_FIRST_TEXEL(tri));
+    uvec4 a = imageLoad(trace_tris, first), b = imageLoad(trace_tris, first + 1), c = imageLoad(trace_tris, first + 2);
+    /* An even triangle starts at a texel, an odd one half-way into one. */
+    bool odd = (tri & 1u) != 0u;
+    uvec3 v0 = odd ? uvec3(a.zw, b.x) : a.xyz;
+    uvec3 v1 = odd ? b.yzw : uvec3(a.w, b.xy);
+    uvec3 v2 = odd ? c.xyz : uvec3(b.zw, c.x);
+    uint id = odd ? c.w : c.y;
+    last = (id & VKRT_TRACE_TRI_LAST) != 0u;
+    return vkrt_gpu_tri(uintBitsToFloat(v0), id & ~VKRT_TRACE_TRI_LAST, uintBitsToFloat(v1), 0u, uintBitsToFloat(v2), 0u,
+                        vec3(0.0), 0u);
 }
 
 /* Ray `index`'s closest triangle so far (NO_PRIM: none), in the triangle word of its hit: a
@@ -312,7 +318,7 @@ void store_wide_hit(uint index, vkrt_gpu_hit h)
 /* The closest (ANYHIT: any) hit of r through the BVH: the wide one where the pipeline has it. */
 bool trace_scene(ray r, uint slot, inout hit best, inout heat_counts heat)
 {
-    if (WIDE != 0u) return trace_wide(r, true, slot, 0u, best);
+    if (WIDE != 0u) return trace_wide(r, true, slot, slot, 0u, best);
     return trace_bvh(r, slot, best, heat);
 }
 
@@ -456,22 +462,42 @@ void trace_buffer_ray()
                                        : vkrt_gpu_hit(-1.0, NO_PRIM, 0.0, 0.0);
 }
 
-/* vkrt_trace_rays and the wavefront through the wide BVH: WIDE_RAYS rays per invocation. Once
- * all of the invocation's rays are done, each hit's distance and barycentrics come from testing
- * the triangle the traversal recorded again (the same function on the same ray and triangle,
- * so the same bits); the buffer variant's hits become vkrt_hit: prim_id instead of the
- * triangle, the distance refined. */
+/* vkrt_trace_rays and the wavefront through the wide BVH, in two dispatches. The trace: each
+ * lane takes a ray slot (WIDE_RAYS rays) and, as it finishes one, the next slot free
+ * (take_ray_slot), recording each ray's closest triangle; a lane the budget stops keeps the
+ * slot it was tracing in its continuation slot. */
 void trace_buffer_rays_wide()
 {
     uint slot = gl_WorkGroupID.x * VKRT_TRACE_GROUP_SIZE + gl_LocalInvocationIndex;
-    uint first = wide_ray_index(0u);
-    if (first >= p.tile_width || already_finished(slot)) return;
+    uint rays = slot;
+    if (BUDGET != 0u && p.resume != 0u) {
+        if (already_finished(slot)) return;
+    } else {
+        rays = take_ray_slot(0u);
+        if (rays == NO_SLOT || wide_ray_index(rays, 0u) >= p.tile_width) {
+            mark_finished(slot);
+            return;
+        }
+    }
     ray r;
-    bool valid = load_wide_ray(first, r);
+    bool valid = load_wide_ray(wide_ray_index(rays, 0u), r);
     hit best = hit(r.tmax, 0.0, 0.0, NO_PRIM, NO_PRIM);
-    if (!trace_wide(r, valid, slot, 0u, best)) return;
+    trace_wide(r, valid, slot, rays, 0u, best);
+}
+
+/* The finish (FINISH), once every ray is traced: each recorded triangle tested again for the
+ * distance and barycentrics (the same function on the same ray and triangle, so the same
+ * bits), an invocation a slot; the buffer variant's hits become vkrt_hit: prim_id instead of
+ * the triangle, the distance refined. A dispatch of its own, since a lane no longer knows which
+ * slots it traced. */
+void finish_buffer_rays_wide()
+{
+    /* A pass the budget stopped leaves its rays to the next, whose finish turns every ray's
+     * triangle into its hit once: a finished hit holds prim_id, not the triangle. */
+    if (unfinished != 0u) return;
+    uint slot = gl_WorkGroupID.x * VKRT_TRACE_GROUP_SIZE + gl_LocalInvocationIndex;
     for (uint k = 0u; k < WIDE_RAYS; k++) {
-        uint index = wide_ray_index(k);
+        uint index = wide_ray_index(slot, k);
         if (index >= p.tile_width) break;
         uint tri_index = load_wide_hit_tri(index);
         vkrt_gpu_hit h = vkrt_gpu_hit(-1.0, NO_PRIM, 0.0, 0.0);
@@ -480,6 +506,7 @@ void trace_buffer_rays_wide()
              * and a word at a time, 8% of a primary-ray trace. */
             bool last;
             vkrt_gpu_tri tri = load_wide_tri(tri_index, last);
+            ray r;
             load_wide_ray(index, r);
             hit again = hit(r.tmax, 0.0, 0.0, NO_PRIM, NO_PRIM);
             test_triangle_data(r, tri_index, tri, again);
@@ -498,7 +525,8 @@ void trace_buffer_rays_wide()
 void main()
 {
     if (RAYGEN != VKRT_GPU_RAYGEN_CAMERA && WIDE != 0u) {
-        trace_buffer_rays_wide();
+        if (FINISH != 0u) finish_buffer_rays_wide();
+        else trace_buffer_rays_wide();
         return;
     }
     if (RAYGEN != VKRT_GPU_RAYGEN_CAMERA) {

@@ -12,8 +12,8 @@
  * visits a node, or tests one triangle (the first of a leaf together with the step that
  * reached it), budgeted in the same way (VKRT_SPEC_BUDGET) with the same continuation state.
  *
- * Included by trace.comp after test_triangle_data, mark_finished, load_wide_ray, load_wide_tri
- * and store_wide_hit_tri. */
+ * Included by trace.comp after test_triangle_data, mark_finished, load_wide_ray, load_wide_tri,
+ * store_wide_hit_tri and the next_slot counter. */
 #ifndef VKRT_TRAVERSE_WIDE_GLSL
 #define VKRT_TRAVERSE_WIDE_GLSL
 
@@ -122,11 +122,29 @@ uint visit_wide_node(ray r, wide_node n, float best_t, out uvec4 keys)
 const bool WIDE_REFILL = RAYGEN != VKRT_GPU_RAYGEN_CAMERA;
 const uint WIDE_RAYS = WIDE_REFILL ? VKRT_WIDE_RAYS_PER_LANE : 1u;
 
-/* The ray buffer's index of this invocation's k-th ray: consecutive lanes take consecutive
- * rays (neighbouring pixels for camera ray arrays), the group's rays one round at a time. */
-uint wide_ray_index(uint k)
+/* The ray buffer's index of the k-th ray of ray slot `slot`: a slot is an invocation's worth of
+ * rays (WIDE_RAYS), laid out as if invocation `slot` of the dispatch took them, so that
+ * consecutive slots take consecutive rays (neighbouring pixels for camera ray arrays), a
+ * workgroup's worth of slots their rays one round at a time. */
+uint wide_ray_index(uint slot, uint k)
 {
-    return (gl_WorkGroupID.x * WIDE_RAYS + k) * VKRT_TRACE_GROUP_SIZE + gl_LocalInvocationIndex;
+    return ((slot / VKRT_TRACE_GROUP_SIZE) * WIDE_RAYS + k) * VKRT_TRACE_GROUP_SIZE + slot % VKRT_TRACE_GROUP_SIZE;
+}
+
+#define NO_SLOT 0xFFFFFFFFu
+
+/* The next ray slot nobody has taken (the slots of a pass's dispatch, each taken once), for a
+ * lane whose slot is done, or NO_SLOT where this lane takes no more: in a resume pass (the
+ * pass's first already took every slot), or once `steps` are half the budget, so that the
+ * slots taken are likely to finish within it. lavapipe's threads each take a fixed half of a
+ * dispatch's workgroups: with each invocation keeping to its own slot, a thread whose half
+ * held the harder rays (the mesh rather than the sky), or whose core the machine's other
+ * guests slowed, worked on alone while the other idled (the two were 74% and 84% busy);
+ * taking the next free slot keeps both busy to the end (91-94%). */
+uint take_ray_slot(uint steps)
+{
+    if (BUDGET != 0u && (p.resume != 0u || steps >= BUDGET / 2u)) return NO_SLOT;
+    return atomicAdd(next_slot, 1u);
 }
 
 /* Pushes the child of the slot in sort key `key` (visit_wide_node) with its entry distance. A
@@ -139,10 +157,10 @@ uint wide_ray_index(uint k)
     }
 
 /* The closest (or, ANYHIT, any) hit of r, as trace_bvh finds it; with WIDE_RAYS > 1 the hits of
- * this invocation's rays from its k-th on (r is that one, `valid` whether it may hit anything),
- * each ray's triangle stored by store_wide_hit_tri. Returns false where the budget stopped it (the
- * state is then in `slot`). */
-bool trace_wide(ray r, bool valid, uint slot, uint k, inout hit best)
+ * ray slot `rays`' rays from its k-th on (r is that one, `valid` whether it may hit anything),
+ * then of the slots take_ray_slot gives, each ray's triangle stored by store_wide_hit_tri.
+ * Returns false where the budget stopped it (the state is then in continuation slot `slot`). */
+bool trace_wide(ray r, bool valid, uint slot, uint rays, uint k, inout hit best)
 {
     uint stack_ref[VKRT_TRAVERSAL_STACK_SIZE];
     float stack_tnear[VKRT_TRAVERSAL_STACK_SIZE];
@@ -159,8 +177,9 @@ bool trace_wide(ray r, bool valid, uint slot, uint k, inout hit best)
         held = s.heat_nodes;
         held_tnear = uintBitsToFloat(s.heat_leaves);
         if (WIDE_REFILL) {
+            rays = s.heat_tris;
             k = s.tri_end;
-            valid = load_wide_ray(wide_ray_index(k), r);
+            valid = load_wide_ray(wide_ray_index(rays, k), r);
         }
         best = hit(s.t, s.u, s.v, s.tri, s.prim);
         for (uint i = 0u; i < sp; i++) {
@@ -184,13 +203,18 @@ bool trace_wide(ray r, bool valid, uint slot, uint k, inout hit best)
          * lane's bit of the mask, and a mask that changes from step to step mispredicts those
          * branches (5% of a primary-ray trace's time). A ray's last store is the one made in
          * the step that finds it done, below. */
-        if (WIDE_REFILL) store_wide_hit_tri(wide_ray_index(k), best);
+        if (WIDE_REFILL) store_wide_hit_tri(wide_ray_index(rays, k), best);
         if (node == NO_NODE && tri == NO_TRI && sp == 0u && held == NO_NODE) {
             if (!WIDE_REFILL) break;
-            /* This ray is done: the lane takes its next one, and visits its root below. */
+            /* This ray is done: the lane takes its next one (of its slot, or of the next slot
+             * free), and visits its root below. */
             k++;
-            uint index = wide_ray_index(k);
-            if (k == WIDE_RAYS || index >= p.tile_width) break;
+            if (k == WIDE_RAYS) {
+                k = 0u;
+                rays = take_ray_slot(steps);
+            }
+            uint index = rays == NO_SLOT ? NO_SLOT : wide_ray_index(rays, k);
+            if (index >= p.tile_width) break;
             valid = load_wide_ray(index, r);
             best = hit(r.tmax, 0.0, 0.0, NO_PRIM, NO_PRIM);
             node = valid ? 0u : NO_NODE;
@@ -270,7 +294,7 @@ bool trace_wide(ray r, bool valid, uint slot, uint k, inout hit best)
     /* Saved after the loop, as trace_bvh does (an `if` inside it would cost every iteration). */
     if (BUDGET != 0u && suspended) {
         states[slot] = vkrt_gpu_resume(1u, node, tri, k, sp, best.t, best.u, best.v, best.tri, best.prim, held,
-                                       floatBitsToUint(held_tnear), 0u, 0u, 0u, 0u);
+                                       floatBitsToUint(held_tnear), rays, 0u, 0u, 0u);
         for (uint i = 0u; i < sp; i++)
             saved_stack[slot * VKRT_TRAVERSAL_STACK_SIZE + i] = vkrt_gpu_stack_entry(stack_ref[i], stack_tnear[i]);
         atomicAdd(unfinished, 1u);

@@ -36,23 +36,24 @@ typedef struct vkrt_float3 { float x, y, z; } vkrt_float3;
 #define VKRT_BINDING_RAYS 4
 #define VKRT_BINDING_RESUME 5          /* vkrt_gpu_resume per pixel of a tile / ray of a chunk */
 #define VKRT_BINDING_RESUME_STACK 6    /* VKRT_TRAVERSAL_STACK_SIZE vkrt_gpu_stack_entry per slot */
-#define VKRT_BINDING_UNFINISHED 7      /* one uint: invocations that stopped at the budget */
+#define VKRT_BINDING_UNFINISHED 7      /* two uints: invocations that stopped at the budget, and
+                                          the next ray slot a wide trace takes (both cleared
+                                          before every pass) */
 #define VKRT_BINDING_COUNTERS 8        /* vkrt_gpu_counters per pixel of a tile (VKRT_SPEC_COUNTERS) */
 #define VKRT_BINDING_SURFACES 9        /* vkrt_gpu_surface per triangle, by prim_id (albedo, uv) */
 #define VKRT_BINDING_MATERIALS 10      /* vkrt_gpu_material table (albedo) */
 #define VKRT_BINDING_TEXTURES 11       /* vkrt_gpu_texture table (albedo) */
 #define VKRT_BINDING_TEXELS 12         /* every texture's texels: linear RGBA as 4 halves (uvec2) */
 #define VKRT_BINDING_PIECES 13         /* vkrt_gpu_address piece table of a split scene (VKRT_SPEC_SPLIT) */
-/* Bindings 14 .. 18 are storage texel buffers, the wide traversal's arrays (RGBA32UI but for
+/* Bindings 14 .. 17 are storage texel buffers, the wide traversal's arrays (RGBA32UI but for
  * the last): */
 #define VKRT_BINDING_WIDE_NODES 14     /* the wide BVH (VKRT_SPEC_WIDE), read only */
-#define VKRT_BINDING_TRACE_TRIS 15     /* the triangles' corner indices, read only */
-#define VKRT_BINDING_TRACE_VERTS 16    /* their corners, read only */
-#define VKRT_BINDING_RAY_TEXELS 17     /* a view of the rays buffer, a ray two texels, read only */
-#define VKRT_BINDING_HIT_WORDS 18      /* an R32UI view of the hits buffer, a hit four texels */
+#define VKRT_BINDING_TRACE_TRIS 15     /* its triangles, whole, read only */
+#define VKRT_BINDING_RAY_TEXELS 16     /* a view of the rays buffer, a ray two texels, read only */
+#define VKRT_BINDING_HIT_WORDS 17      /* an R32UI view of the hits buffer, a hit four texels */
 #define VKRT_BINDING_TEXEL_FIRST VKRT_BINDING_WIDE_NODES
-#define VKRT_BINDING_TEXEL_COUNT 5     /* the texel buffers, bindings 14 .. 18 */
-#define VKRT_BINDING_COUNT 19          /* bindings 0 .. 18: the image one, the texel buffers,
+#define VKRT_BINDING_TEXEL_COUNT 4     /* the texel buffers, bindings 14 .. 17 */
+#define VKRT_BINDING_COUNT 18          /* bindings 0 .. 17: the image one, the texel buffers,
                                           storage buffers the rest */
 
 /* Descriptor bindings of shade.comp (set 0): the lighting modes' wavefront stages. The ray and
@@ -92,6 +93,8 @@ typedef struct vkrt_float3 { float x, y, z; } vkrt_float3;
                              piece of a split scene, read through the piece table */
 #define VKRT_SPEC_WIDE 11 /* 1: traverse the wide BVH through the texel buffers (a scene in one
                              buffer, no heat or counters: those count the binary BVH's steps) */
+#define VKRT_SPEC_FINISH 12 /* 1 (with WIDE, a ray buffer): the pass after a wide trace, which turns
+                               each ray's recorded triangle into its hit (distance, barycentrics) */
 
 /* Specialization constants of shade.comp: the stage, the mode, and one switch per feature, so
  * a scene pays only for what it uses (vkrt_render_stats.features lists those compiled in). */
@@ -284,12 +287,16 @@ VKRT_STRUCT(vkrt_gpu_tri) {
  *   texel 1: q of lo.x, lo.y, lo.z and hi.x, texel 2: of hi.y, hi.z (a byte per slot), 0, 0;
  *   texel 3: the child references: a node index, VKRT_WIDE_LEAF | first triangle, or
  *            VKRT_WIDE_NO_CHILD.
- * A triangle is one texel, in the triangle array's order: the indices of its three corners in
- * the vertex texels (x, y, z float bits, 0), each corner position stored once however many
- * triangles share it, and its prim_id, with VKRT_TRACE_TRI_LAST set on each leaf's last
- * triangle (a leaf reference names only its first). About 24 bytes a triangle against
- * vkrt_gpu_tri's 64; the normals are read from the triangle array once per ray, at the
- * closest hit. */
+ * A triangle is VKRT_WIDE_TRI_WORDS words, in the triangle array's order, packed without gaps
+ * (two triangles in five texels): its corners' x, y, z float bits, then its prim_id with
+ * VKRT_TRACE_TRI_LAST set on each leaf's last triangle (a leaf reference names only its
+ * first). A triangle is read as the three texels from VKRT_WIDE_TRI_FIRST_TEXEL, which an odd
+ * one starts half-way into. 40 bytes a triangle against vkrt_gpu_tri's 64; the normals are
+ * read from the triangle array once per ray, at the closest hit. (Corner indices into
+ * deduplicated corners took 24 bytes, but each test read the indices, then the corners:
+ * whole triangles traced AO rays 5-9% faster on dragon_200k and the full dragon.) */
+#define VKRT_WIDE_TRI_WORDS 10
+#define VKRT_WIDE_TRI_FIRST_TEXEL(i) (2u * (i) + (i) / 2u)
 #define VKRT_WIDE_NODE_TEXELS 4
 #define VKRT_WIDE_LEAF 0x80000000u
 #define VKRT_WIDE_NO_CHILD 0xFFFFFFFFu
@@ -326,7 +333,8 @@ VKRT_STRUCT(vkrt_gpu_resume) {
     VKRT_UINT prim;        /* offset 36; its prim_id, 0xFFFFFFFF: none */
     VKRT_UINT heat_nodes;  /* offset 40; heat counters so far (the wide traversal, which counts
                               nothing: its held leaf, and that leaf's entry distance's bits in
-                              heat_leaves; tri_end: the invocation's ray in progress) */
+                              heat_leaves; tri_end: the ray in progress of the ray slot in
+                              heat_tris) */
     VKRT_UINT heat_leaves; /* offset 44 */
     VKRT_UINT heat_tris;   /* offset 48 */
     VKRT_UINT pad0;        /* offset 52; to 64 bytes, one cache line */

@@ -113,16 +113,13 @@ static vkrt_result upload_wide(vk_context *vk, const bvh *b, const vkrt_gpu_tri 
     /* The wide traversal also reads a chunk's rays (two texels each) and writes its hits (four
      * words each) through texel views of the ray and hit buffers. */
     const bool usable = w.node_count && wide_traversal_fits(w.depth, w.tri_count) &&
-                        (uint64_t)w.node_count * VKRT_WIDE_NODE_TEXELS <= texel_limit && w.tri_count <= texel_limit &&
-                        w.vertex_count <= texel_limit && 4ull * VKRT_RAY_CHUNK <= texel_limit;
+                        (uint64_t)w.node_count * VKRT_WIDE_NODE_TEXELS <= texel_limit &&
+                        w.tri_texel_count <= texel_limit && 4ull * VKRT_RAY_CHUNK <= texel_limit;
     r = vk_texel_buffer_create(vk, w.node_texels, usable ? w.node_count * VKRT_WIDE_NODE_TEXELS : 0, "vkrt wide BVH",
                                &out->wide_nodes);
     if (r == VKRT_OK)
-        r = vk_texel_buffer_create(vk, w.tri_texels, usable ? w.tri_count : 0, "vkrt triangle corner indices",
+        r = vk_texel_buffer_create(vk, w.tri_texels, usable ? (uint32_t)w.tri_texel_count : 0, "vkrt wide triangles",
                                    &out->trace_tris);
-    if (r == VKRT_OK)
-        r = vk_texel_buffer_create(vk, w.vertex_texels, usable ? w.vertex_count : 0, "vkrt triangle corners",
-                                   &out->trace_verts);
     out->wide = r == VKRT_OK && usable;
     wide_arrays_destroy(vk->core, &w);
     return r;
@@ -197,13 +194,12 @@ void gpu_scene_destroy(vk_context *vk, gpu_scene *s)
     vk_buffer_destroy(vk, &s->pieces);
     vk_texel_buffer_destroy(vk, &s->wide_nodes);
     vk_texel_buffer_destroy(vk, &s->trace_tris);
-    vk_texel_buffer_destroy(vk, &s->trace_verts);
 }
 
 void gpu_scene_usage(const gpu_scene *s, uint64_t *out_bytes, uint32_t *out_buffers)
 {
     uint64_t bytes = s->materials.allocated + s->textures.allocated + s->texels.allocated + s->pieces.allocated +
-                     s->wide_nodes.buffer.allocated + s->trace_tris.buffer.allocated + s->trace_verts.buffer.allocated;
+                     s->wide_nodes.buffer.allocated + s->trace_tris.buffer.allocated;
     const gpu_array *arrays[3] = { &s->nodes, &s->tris, &s->surfaces };
     for (int a = 0; a < 3; a++)
         for (uint32_t k = 0; k < arrays[a]->count; k++) bytes += arrays[a]->pieces[k].allocated;
@@ -213,7 +209,7 @@ void gpu_scene_usage(const gpu_scene *s, uint64_t *out_bytes, uint32_t *out_buff
 
 uint64_t gpu_scene_traversal_bytes(const gpu_scene *s)
 {
-    if (s->wide) return s->wide_nodes.buffer.size + s->trace_tris.buffer.size + s->trace_verts.buffer.size;
+    if (s->wide) return s->wide_nodes.buffer.size + s->trace_tris.buffer.size;
     uint64_t bytes = 0;
     const gpu_array *arrays[2] = { &s->nodes, &s->tris };
     for (int a = 0; a < 2; a++)
@@ -391,7 +387,7 @@ static vkrt_result create_descriptors(vk_context *vk, const gpu_scene *scene, Vk
                                               .dstBinding = VKRT_BINDING_IMAGE, .descriptorCount = 1,
                                               .descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_IMAGE, .pImageInfo = &image };
     const VkBufferView texels[VKRT_BINDING_TEXEL_COUNT] = { scene->wide_nodes.view, scene->trace_tris.view,
-                                                            scene->trace_verts.view, o->ray_texels, o->hit_words };
+                                                            o->ray_texels, o->hit_words };
     for (uint32_t i = 0; i < VKRT_BINDING_TEXEL_COUNT; i++)
         writes[BUFFERS + 1 + i] = (VkWriteDescriptorSet){ .sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET,
                                                           .dstSet = o->set,
@@ -401,9 +397,8 @@ static vkrt_result create_descriptors(vk_context *vk, const gpu_scene *scene, Vk
                                                           .pTexelBufferView = &texels[i] };
     _Static_assert(VKRT_BINDING_WIDE_NODES == VKRT_BINDING_TEXEL_FIRST &&
                        VKRT_BINDING_TRACE_TRIS == VKRT_BINDING_TEXEL_FIRST + 1 &&
-                       VKRT_BINDING_TRACE_VERTS == VKRT_BINDING_TEXEL_FIRST + 2 &&
-                       VKRT_BINDING_RAY_TEXELS == VKRT_BINDING_TEXEL_FIRST + 3 &&
-                       VKRT_BINDING_HIT_WORDS == VKRT_BINDING_TEXEL_FIRST + 4 &&
+                       VKRT_BINDING_RAY_TEXELS == VKRT_BINDING_TEXEL_FIRST + 2 &&
+                       VKRT_BINDING_HIT_WORDS == VKRT_BINDING_TEXEL_FIRST + 3 &&
                        VKRT_BINDING_TEXEL_FIRST + VKRT_BINDING_TEXEL_COUNT == VKRT_BINDING_COUNT,
                    "the texel buffers' bindings are adjacent, and the last");
     vkUpdateDescriptorSets(vk->device, sizeof writes / sizeof writes[0], writes, 0, NULL);
@@ -451,8 +446,8 @@ static vkrt_result create_render_objects(vk_context *vk, const gpu_scene *scene,
                              VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, VK_MEMORY_DEVICE, "vkrt resume stacks",
                              &o->resume_stack);
     if (r == VKRT_OK)
-        r = vk_buffer_create(vk, sizeof(uint32_t), VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT,
-                             VK_MEMORY_READBACK, "vkrt unfinished count", &o->unfinished);
+        r = vk_buffer_create(vk, 2 * sizeof(uint32_t), VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT,
+                             VK_MEMORY_READBACK, "vkrt unfinished count and next ray slot", &o->unfinished);
     if (r == VKRT_OK)
         r = vk_buffer_create(vk, (VkDeviceSize)(counter_slots ? counter_slots : 1) * sizeof(vkrt_gpu_counters),
                              VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, VK_MEMORY_READBACK, "vkrt traversal counters",
@@ -610,14 +605,17 @@ static VkImageMemoryBarrier record_image_to_general(VkCommandBuffer cmd, const r
     return to_general;
 }
 
-/* The trace dispatch(es) over groups_x x groups_y workgroups, between two timestamps. With a
- * loop budget (BVH traversal on lavapipe) the unfinished counter is cleared first and handed
- * to the host after. */
+/* The trace dispatch(es) over groups_x x groups_y workgroups, and a wide ray trace's finish
+ * after them, between two timestamps. With a
+ * loop budget (BVH traversal on lavapipe) or ray slots to take (a wide ray trace) the
+ * unfinished counter and the next ray slot are cleared first; the former is handed to the
+ * host after. */
 static void record_dispatches(VkCommandBuffer cmd, const vk_trace_pipeline *pipe, const render_objects *o,
                               const gpu_scene *scene, vkrt_gpu_push push, bool naive, bool budget, pass_range range,
                               uint32_t groups_x, uint32_t groups_y)
 {
-    if (budget) {
+    /* A wide ray trace (it has a finish pass) takes its ray slots from the second counter. */
+    if (budget || pipe->finish) {
         /* The previous pass (an earlier submission) wrote the continuation state this one
          * reads or overwrites, and its atomics wrote the counter the fill overwrites. */
         VkMemoryBarrier previous = {
@@ -644,6 +642,20 @@ static void record_dispatches(VkCommandBuffer cmd, const vk_trace_pipeline *pipe
         vkCmdDispatch(cmd, groups_x, groups_y, 1);
     } else {
         record_naive_chunks(cmd, pipe, o, scene, push, range, groups_x, groups_y);
+    }
+    if (pipe->finish) {
+        /* A wide ray trace's finish reads the triangles the trace recorded and the unfinished
+         * count, and writes the hits. Recorded in every pass, it does its work in the one that
+         * leaves nothing unfinished, the last. */
+        VkMemoryBarrier traced = {
+            .sType = VK_STRUCTURE_TYPE_MEMORY_BARRIER,
+            .srcAccessMask = VK_ACCESS_SHADER_WRITE_BIT,
+            .dstAccessMask = VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT,
+        };
+        vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 0, 1,
+                             &traced, 0, NULL, 0, NULL);
+        vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, pipe->finish);
+        vkCmdDispatch(cmd, groups_x, groups_y, 1);
     }
     if (o->queries) vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, o->queries, 1);
     /* The host reads the counter after the fence. */

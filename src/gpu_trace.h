@@ -34,8 +34,7 @@ typedef struct gpu_scene {
     bool surfaces_uploaded;
     bool wide;                 /* the wide traversal's arrays are there (VKRT_SPEC_WIDE) */
     vk_texel_buffer wide_nodes; /* its nodes and */
-    vk_texel_buffer trace_tris; /* triangles and */
-    vk_texel_buffer trace_verts; /* their corners (one-texel placeholders without them) */
+    vk_texel_buffer trace_tris; /* triangles (one-texel placeholders without them) */
     double wide_pack_ms;       /* the host's collapse and packing of those arrays */
     uint32_t node_count;
     uint32_t tri_count;

@@ -222,16 +222,13 @@ static vkrt_result create_pipeline(vk_context *vk, VkShaderModule module, VkPipe
     return VKRT_OK;
 }
 
-vkrt_result vk_trace_pipeline_get(vk_context *vk, vk_trace_variant variant, vk_trace_pipeline *out)
+/* The pipeline of one variant, found among those made or made now. */
+static vkrt_result variant_pipeline(vk_context *vk, vk_trace_variant variant, VkPipeline *out)
 {
-    vkrt_result r = ensure_base(vk);
-    if (r != VKRT_OK) return r;
     vk_pipelines *p = vk->pipelines;
-    out->set_layout = p->set_layout;
-    out->layout = p->layout;
     for (uint32_t i = 0; i < p->count; i++) {
         if (memcmp(&p->variants[i], &variant, sizeof variant) == 0) {
-            out->pipeline = p->pipelines[i];
+            *out = p->pipelines[i];
             return VKRT_OK;
         }
     }
@@ -250,15 +247,36 @@ vkrt_result vk_trace_pipeline_get(vk_context *vk, vk_trace_variant variant, vk_t
         { VKRT_SPEC_TEXTURES, offsetof(vk_trace_variant, textures), sizeof(uint32_t) },
         { VKRT_SPEC_SPLIT, offsetof(vk_trace_variant, split), sizeof(uint32_t) },
         { VKRT_SPEC_WIDE, offsetof(vk_trace_variant, wide), sizeof(uint32_t) },
+        { VKRT_SPEC_FINISH, offsetof(vk_trace_variant, finish), sizeof(uint32_t) },
     };
     VkPipeline pipeline;
-    r = create_pipeline(vk, p->trace_module, p->layout, entries, sizeof entries / sizeof entries[0], &variant,
-                        sizeof variant, "vkrt trace", &pipeline);
+    vkrt_result r = create_pipeline(vk, p->trace_module, p->layout, entries, sizeof entries / sizeof entries[0],
+                                    &variant, sizeof variant, variant.finish ? "vkrt trace finish" : "vkrt trace",
+                                    &pipeline);
     if (r != VKRT_OK) return r;
     p->variants[p->count] = variant;
     p->pipelines[p->count++] = pipeline;
-    out->pipeline = pipeline;
+    *out = pipeline;
     return VKRT_OK;
+}
+
+vkrt_result vk_trace_pipeline_get(vk_context *vk, vk_trace_variant variant, vk_trace_pipeline *out)
+{
+    vkrt_result r = ensure_base(vk);
+    if (r != VKRT_OK) return r;
+    vk_pipelines *p = vk->pipelines;
+    out->set_layout = p->set_layout;
+    out->layout = p->layout;
+    out->finish = VK_NULL_HANDLE;
+    if ((r = variant_pipeline(vk, variant, &out->pipeline)) != VKRT_OK) return r;
+    if (!variant.wide || variant.raygen == VKRT_GPU_RAYGEN_CAMERA || variant.finish) return VKRT_OK;
+    /* The finish tests one recorded triangle a ray: the budget and the any-hit rule do not
+     * apply, so the trace variants that differ only there share it. */
+    vk_trace_variant finish = variant;
+    finish.finish = 1;
+    finish.budget = 0;
+    finish.anyhit = 0;
+    return variant_pipeline(vk, finish, &out->finish);
 }
 
 vkrt_result vk_shade_pipeline_get(vk_context *vk, vk_shade_variant variant, vk_trace_pipeline *out)

@@ -1,7 +1,7 @@
 /* The trace pipeline: GLSL embedded in the library compiled to SPIR-V through glslang's C API
  * (once per context), one descriptor set layout and pipeline layout, and one compute pipeline
  * per specialisation (mode, traversal, heat, ray source, intersector, budget, counters, alpha,
- * any-hit, split), created on first use and kept. */
+ * any-hit, split, wide, finish), created on first use and kept. */
 #ifndef VKRT_VK_PIPELINE_H
 #define VKRT_VK_PIPELINE_H
 
@@ -23,16 +23,19 @@ typedef struct vk_trace_variant {
     uint32_t textures;   /* 1: the scene has textures (VKRT_SPEC_TEXTURES) */
     uint32_t split;      /* the scene's gpu_scene.split_shift (VKRT_SPEC_SPLIT) */
     uint32_t wide;       /* 1: the wide BVH through texel buffers (VKRT_SPEC_WIDE) */
+    uint32_t finish;     /* 1: a wide ray trace's finish pass (VKRT_SPEC_FINISH) */
 } vk_trace_variant;
 
 typedef struct vk_trace_pipeline {
     VkDescriptorSetLayout set_layout;
     VkPipelineLayout layout;
     VkPipeline pipeline;
+    VkPipeline finish;   /* a wide ray trace's finish pass, to dispatch after it; else NULL */
 } vk_trace_pipeline;
 
-/* Returns the pipeline for a variant, compiling the shader and creating the layouts the first
- * time. A shader that fails to compile is VKRT_ERROR_VULKAN with glslang's log as detail. */
+/* Returns the pipeline for a variant (and for a wide ray trace its finish pass's), compiling
+ * the shader and creating the layouts the first time. A shader that fails to compile is
+ * VKRT_ERROR_VULKAN with glslang's log as detail. */
 vkrt_result vk_trace_pipeline_get(vk_context *vk, vk_trace_variant variant, vk_trace_pipeline *out);
 
 /* A pipeline of shade.comp (the lighting modes' stages). */

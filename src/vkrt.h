@@ -279,8 +279,8 @@ typedef struct vkrt_scene_stats {
                                       the scene is split across buffers; 0 on the CPU backend */
     uint64_t traversal_bytes;      /* the arrays a ray's traversal reads, what to set against
                                       another tracer's acceleration structure: GPU backend, the
-                                      4-wide BVH, the triangles' corner indices and the distinct
-                                      corners on the device (the binary nodes and triangles where
+                                      4-wide BVH and its triangles (40 bytes each) on the device
+                                      (the binary nodes and triangles where
                                       the scene keeps to them: split, or beyond the wide BVH's
                                       limits); CPU backend, its nodes and triangles */
 } vkrt_scene_stats;

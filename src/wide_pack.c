@@ -5,8 +5,6 @@
 
 #include "bvh_wide.h"
 
-#define NO_VERTEX 0xFFFFFFFFu
-
 static uint32_t float_bits(float f)
 {
     uint32_t u;
@@ -103,70 +101,18 @@ static void pack_node(const bvh4_node *n, uint32_t *texels)
                                                    : n->child[s];
 }
 
-/* Distinct corner positions, by their bits (so -0 and +0 stay apart and every corner reads
- * back exactly as the triangle array holds it): an open-addressing table of vertex indices,
- * at most half full. Both it and the vertices grow as corners come: a closed mesh has about
- * half a distinct corner per triangle, a triangle soup three, and sizing for the soup would
- * hold some 75 bytes a triangle (750 MB for ten million) through the packing of any mesh. */
-typedef struct vertex_table {
-    core *c;
-    uint32_t *slots;
-    uint64_t slot_count;   /* a power of two */
-    uint32_t *texels;      /* 4 words a vertex */
-    size_t capacity;       /* vertices texels has room for */
-    uint32_t count;
-} vertex_table;
-
-static uint32_t position_hash(const uint32_t p[3])
+/* Triangle i's VKRT_WIDE_TRI_WORDS words from word VKRT_WIDE_TRI_WORDS * i: its corners' x, y,
+ * z float bits (so -0 and +0 stay apart and every corner reads back exactly as the triangle
+ * array holds it) and its prim_id. */
+static void pack_triangle(const vkrt_gpu_tri *t, uint32_t *words)
 {
-    uint32_t h = p[0] * 0x9E3779B1u ^ p[1] * 0x85EBCA77u ^ p[2] * 0xC2B2AE3Du;
-    return h ^ (h >> 15);
-}
-
-/* The free slot where vertex p belongs, or the slot that holds it. */
-static uint32_t *find_slot(const vertex_table *t, const uint32_t p[3])
-{
-    const uint64_t mask = t->slot_count - 1;
-    for (uint64_t i = position_hash(p) & mask;; i = (i + 1) & mask) {
-        uint32_t *slot = &t->slots[i];
-        if (*slot == NO_VERTEX || memcmp(t->texels + (size_t)*slot * 4, p, 3 * sizeof *p) == 0) return slot;
+    const vkrt_float3 corners[3] = { t->v0, t->v1, t->v2 };
+    for (int k = 0; k < 3; k++) {
+        words[3 * k] = float_bits(corners[k].x);
+        words[3 * k + 1] = float_bits(corners[k].y);
+        words[3 * k + 2] = float_bits(corners[k].z);
     }
-}
-
-/* A table of `slot_count` slots (a power of two) with every vertex so far in it. */
-static bool rehash(vertex_table *t, uint64_t slot_count)
-{
-    if (slot_count > (uint64_t)UINT32_MAX + 1 || slot_count > SIZE_MAX / sizeof *t->slots) return false;
-    uint32_t *slots = core_alloc_array(t->c, (size_t)slot_count, sizeof *slots);
-    if (!slots) return false;
-    memset(slots, 0xFF, (size_t)slot_count * sizeof *slots);
-    core_free(t->c, t->slots);
-    t->slots = slots;
-    t->slot_count = slot_count;
-    for (uint32_t k = 0; k < t->count; k++) *find_slot(t, t->texels + (size_t)k * 4) = k;
-    return true;
-}
-
-/* The index of corner v, a new vertex if no earlier corner had its bits; false when out of
- * memory. */
-static bool vertex_index(vertex_table *t, vkrt_float3 v, uint32_t *out)
-{
-    const uint32_t p[3] = { float_bits(v.x), float_bits(v.y), float_bits(v.z) };
-    uint32_t *slot = find_slot(t, p);
-    if (*slot != NO_VERTEX) {
-        *out = *slot;
-        return true;
-    }
-    if ((uint64_t)t->count + 1 > t->slot_count / 2) {
-        if (!rehash(t, t->slot_count * 2)) return false;
-        slot = find_slot(t, p);
-    }
-    if (core_grow(t->c, (void **)&t->texels, &t->capacity, (size_t)t->count + 1, 4 * sizeof(uint32_t)) != 0) return false;
-    uint32_t *texel = t->texels + (size_t)t->count * 4;
-    memcpy(texel, p, sizeof p);
-    texel[3] = 0;
-    *out = *slot = t->count++;
-    return true;
+    words[9] = t->prim_id;
 }
 
 vkrt_result wide_pack(core *c, const bvh *b, const vkrt_gpu_tri *tris, wide_arrays *out)
@@ -175,30 +121,23 @@ vkrt_result wide_pack(core *c, const bvh *b, const vkrt_gpu_tri *tris, wide_arra
     bvh4 w;
     vkrt_result r = bvh4_collapse(c, b, &w);
     if (r != VKRT_OK) return r;
-    /* Room to start with for a closed mesh's vertices; triangle counts up to
-     * VKRT_TRACE_TRI_LAST (wide_traversal_fits) keep the indices in range. */
-    vertex_table t = { .c = c };
-    bool ok = core_grow(c, (void **)&t.texels, &t.capacity, (size_t)b->tri_count / 2 + 16, 4 * sizeof(uint32_t)) == 0;
-    uint64_t slots = 64;
-    while (slots < 2 * (uint64_t)t.capacity) slots *= 2;
-    ok = ok && rehash(&t, slots);
+    /* Triangle counts up to VKRT_TRACE_TRI_LAST (wide_traversal_fits) keep the texel count in
+     * range. */
+    const uint64_t tri_texels = b->tri_count ? VKRT_WIDE_TRI_FIRST_TEXEL((uint64_t)b->tri_count - 1) + 3 : 0;
     out->node_texels = core_alloc_array(c, (size_t)w.node_count * VKRT_WIDE_NODE_TEXELS, 4 * sizeof(uint32_t));
-    out->tri_texels = core_alloc_array(c, b->tri_count, 4 * sizeof(uint32_t));
-    ok = ok && out->node_texels && out->tri_texels;
-    if (ok)
+    out->tri_texels = core_alloc_array(c, (size_t)tri_texels, 4 * sizeof(uint32_t));
+    const bool ok = out->node_texels && (out->tri_texels || !tri_texels);
+    if (ok) {
         for (uint32_t i = 0; i < w.node_count; i++)
             pack_node(&w.nodes[i], out->node_texels + (size_t)i * VKRT_WIDE_NODE_TEXELS * 4);
-    for (uint32_t i = 0; ok && i < b->tri_count; i++) {
-        uint32_t *texel = out->tri_texels + (size_t)i * 4;
-        ok = vertex_index(&t, tris[i].v0, &texel[0]) && vertex_index(&t, tris[i].v1, &texel[1]) &&
-             vertex_index(&t, tris[i].v2, &texel[2]);
-        texel[3] = tris[i].prim_id;
+        /* The words after the last triangle, up to its last texel, are zero. */
+        memset(out->tri_texels, 0, (size_t)tri_texels * 4 * sizeof(uint32_t));
+        for (uint32_t i = 0; i < b->tri_count; i++)
+            pack_triangle(&tris[i], out->tri_texels + (size_t)i * VKRT_WIDE_TRI_WORDS);
     }
     const uint32_t node_count = w.node_count, depth = w.depth;
     bvh4_destroy(c, &w);
-    core_free(c, t.slots);
     if (!ok) {
-        core_free(c, t.texels);
         wide_arrays_destroy(c, out);
         return core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "out of memory packing the wide BVH of %u triangles",
                          b->tri_count);
@@ -206,12 +145,12 @@ vkrt_result wide_pack(core *c, const bvh *b, const vkrt_gpu_tri *tris, wide_arra
     /* Leaves partition the triangle array: mark where each ends. */
     for (uint32_t i = 0; i < b->node_count; i++) {
         const vkrt_gpu_node *n = &b->nodes[i];
-        if (n->tri_count) out->tri_texels[(size_t)(n->left_first + n->tri_count - 1) * 4 + 3] |= VKRT_TRACE_TRI_LAST;
+        if (n->tri_count)
+            out->tri_texels[(size_t)(n->left_first + n->tri_count - 1) * VKRT_WIDE_TRI_WORDS + 9] |= VKRT_TRACE_TRI_LAST;
     }
-    out->vertex_texels = t.texels;
-    out->vertex_count = t.count;
     out->node_count = node_count;
     out->tri_count = b->tri_count;
+    out->tri_texel_count = tri_texels;
     out->depth = depth;
     return VKRT_OK;
 }
@@ -220,6 +159,5 @@ void wide_arrays_destroy(core *c, wide_arrays *w)
 {
     core_free(c, w->node_texels);
     core_free(c, w->tri_texels);
-    core_free(c, w->vertex_texels);
     memset(w, 0, sizeof *w);
 }

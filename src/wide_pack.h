@@ -1,6 +1,6 @@
 /* The wide traversal's device arrays (VKRT_SPEC_WIDE; the layout is in shaders/vkrt_shared.h):
- * the 4-wide BVH collapsed from the scene's binary one, the triangles as corner indices and
- * the distinct corner positions, all as RGBA32UI texels. Built on the host just before the upload and freed after it. */
+ * the 4-wide BVH collapsed from the scene's binary one and its triangles, whole, both as RGBA32UI
+ * texels. Built on the host just before the upload and freed after it. */
 #ifndef VKRT_WIDE_PACK_H
 #define VKRT_WIDE_PACK_H
 
@@ -14,10 +14,9 @@
 typedef struct wide_arrays {
     uint32_t *node_texels;  /* 4 words a texel, VKRT_WIDE_NODE_TEXELS texels a node */
     uint32_t node_count;
-    uint32_t *tri_texels;   /* one texel a triangle: corner indices and prim_id */
+    uint32_t *tri_texels;   /* VKRT_WIDE_TRI_WORDS words a triangle: corners and prim_id */
     uint32_t tri_count;
-    uint32_t *vertex_texels; /* one texel a distinct corner position */
-    uint32_t vertex_count;
+    uint64_t tri_texel_count; /* through the last triangle's last texel */
     uint32_t depth;         /* levels of wide nodes */
 } wide_arrays;
 

@@ -525,7 +525,9 @@ static void gpu_trace_rays_match_cpu_and_naive(void)
 /* The wide BVH through texel buffers (the default wherever a scene fits one buffer per array)
  * against the binary BVH it was collapsed from (the test knob keeps a scene to it): the same
  * closest hits bit for bit, ray arrays (VKRT_WIDE_RAYS_PER_LANE rays per invocation, more than
- * one submission) and renders alike, and any-hit queries hit where the binary traversal's do. */
+ * one submission) and renders alike, and any-hit queries hit where the binary traversal's do.
+ * Its arrays (nodes and whole triangles) take at most 64 bytes a triangle (issue 7's memory
+ * bound), fewer than the binary BVH's. */
 static void gpu_wide_traversal_matches_the_binary_one(void)
 {
     const char *path = VKRT_MODELS_DIR "/meshes/dragon_48k.obj";
@@ -535,6 +537,13 @@ static void gpu_wide_traversal_matches_the_binary_one(void)
     gpu->vk->no_wide_traversal = false;
     if (!wide || !binary) goto done;
     CHECK_MSG(wide->gpu.wide && !binary->gpu.wide, "wide arrays uploaded: %d and %d", wide->gpu.wide, binary->gpu.wide);
+    vkrt_scene_stats ws, bs;
+    CHECK(vkrt_scene_stats_get(wide, &ws) == VKRT_OK && vkrt_scene_stats_get(binary, &bs) == VKRT_OK);
+    const double wide_bytes = (double)ws.traversal_bytes / (double)ws.triangles;
+    const double binary_bytes = (double)bs.traversal_bytes / (double)bs.triangles;
+    fprintf(stderr, "  traversal arrays: wide %.1f, binary %.1f bytes a triangle\n", wide_bytes, binary_bytes);
+    CHECK_MSG(wide_bytes > 40.0 && wide_bytes <= 64.0 && wide_bytes < binary_bytes,
+              "wide arrays %.1f bytes a triangle (binary %.1f)", wide_bytes, binary_bytes);
     const size_t n = VKRT_RAY_CHUNK + 777;
     vkrt_ray *rays = random_rays_in_box(n, 99);
     /* Every fourth ray parallel to one or two axes (+-0 components) with its origin on box
@@ -631,9 +640,10 @@ static vkrt_scene *mesh_scene(vkrt_context *ctx, const float *pos, uint32_t vert
 
 enum { FAN_TRIS = 100000, STACK_TRIS = 70000, LONG_RAYS = 48 };
 /* Rays down through the stacked leaf: a workgroup's worth and LONG_RAYS more, so that in the
- * wide traversal (VKRT_WIDE_RAYS_PER_LANE rays an invocation, consecutive lanes taking
- * consecutive rays) the first LONG_RAYS lanes go on to a second ray, and are saved and resumed
- * within it: a continuation that must restore which of its rays a lane was on. */
+ * wide traversal (ray slots of VKRT_WIDE_RAYS_PER_LANE rays, consecutive slots taking
+ * consecutive rays) the lanes on the first LONG_RAYS slots go on to a second ray, and are saved
+ * and resumed within it: a continuation that must restore which slot and which of its rays a
+ * lane was on. */
 enum { STACK_RAYS = VKRT_TRACE_GROUP_SIZE + LONG_RAYS };
 
 /* FAN_TRIS triangles around the origin (the disc of radius 1 in z = 0): every box holds the
