@@ -103,7 +103,9 @@ static void pack_node(const bvh4_node *n, uint32_t *texels)
 
 /* Triangle i's VKRT_WIDE_TRI_WORDS words from word VKRT_WIDE_TRI_WORDS * i: its corners' x, y,
  * z float bits (so -0 and +0 stay apart and every corner reads back exactly as the triangle
- * array holds it) and its prim_id. */
+ * array holds it) and its prim_id, the last word. */
+#define PRIM_WORD (VKRT_WIDE_TRI_WORDS - 1)
+
 static void pack_triangle(const vkrt_gpu_tri *t, uint32_t *words)
 {
     const vkrt_float3 corners[3] = { t->v0, t->v1, t->v2 };
@@ -112,7 +114,7 @@ static void pack_triangle(const vkrt_gpu_tri *t, uint32_t *words)
         words[3 * k + 1] = float_bits(corners[k].y);
         words[3 * k + 2] = float_bits(corners[k].z);
     }
-    words[9] = t->prim_id;
+    words[PRIM_WORD] = t->prim_id;
 }
 
 vkrt_result wide_pack(core *c, const bvh *b, const vkrt_gpu_tri *tris, wide_arrays *out)
@@ -121,8 +123,8 @@ vkrt_result wide_pack(core *c, const bvh *b, const vkrt_gpu_tri *tris, wide_arra
     bvh4 w;
     vkrt_result r = bvh4_collapse(c, b, &w);
     if (r != VKRT_OK) return r;
-    /* Triangle counts up to VKRT_TRACE_TRI_LAST (wide_traversal_fits) keep the texel count in
-     * range. */
+    /* Through the last triangle's third texel; upload_wide keeps the array within the
+     * device's texel-buffer limit. */
     const uint64_t tri_texels = b->tri_count ? VKRT_WIDE_TRI_FIRST_TEXEL((uint64_t)b->tri_count - 1) + 3 : 0;
     out->node_texels = core_alloc_array(c, (size_t)w.node_count * VKRT_WIDE_NODE_TEXELS, 4 * sizeof(uint32_t));
     out->tri_texels = core_alloc_array(c, (size_t)tri_texels, 4 * sizeof(uint32_t));
@@ -146,7 +148,8 @@ vkrt_result wide_pack(core *c, const bvh *b, const vkrt_gpu_tri *tris, wide_arra
     for (uint32_t i = 0; i < b->node_count; i++) {
         const vkrt_gpu_node *n = &b->nodes[i];
         if (n->tri_count)
-            out->tri_texels[(size_t)(n->left_first + n->tri_count - 1) * VKRT_WIDE_TRI_WORDS + 9] |= VKRT_TRACE_TRI_LAST;
+            out->tri_texels[(size_t)(n->left_first + n->tri_count - 1) * VKRT_WIDE_TRI_WORDS + PRIM_WORD] |=
+                VKRT_TRACE_TRI_LAST;
     }
     out->node_count = node_count;
     out->tri_count = b->tri_count;
