@@ -211,7 +211,7 @@ static vkrt_result load_scene(bench *b, int builder, int backend)
     vkrt_scene_desc d = bench_scene_desc(&b->source);
     d.builder = builder ? VKRT_BVH_BUILDER_MIDPOINT : VKRT_BVH_BUILDER_DEFAULT;
     /* The first GPU scene decides whether the GPU runs at all; the second only its own rows. */
-    const char *gpu_rows = backend ? NULL : builder ? "the GPU rows of the midpoint BVH were" : "the GPU backend was";
+    const char *gpu_rows = backend ? NULL : builder ? "the GPU rows of the midpoint BVH were" : BENCH_GPU_BACKEND_ROWS;
     return bench_scene_create(ctx, gpu_rows, &d, &b->scenes[builder][backend], b->gpu_skipped, sizeof b->gpu_skipped,
                               b->report->error, sizeof b->report->error);
 }

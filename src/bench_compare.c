@@ -294,8 +294,9 @@ static vkrt_result load(compare *c)
         vkrt_context *ctx = e == ENGINE_VKRT_CPU ? c->cpu : c->gpu;
         if (!ctx) continue;
         vkrt_scene_desc d = bench_scene_desc(&c->source);
-        vkrt_result r = bench_scene_create(ctx, e == ENGINE_VKRT_GPU ? "the GPU backend was" : NULL, &d, &c->scene[e], c->gpu_skipped,
-                                           sizeof c->gpu_skipped, c->report->error, sizeof c->report->error);
+        vkrt_result r = bench_scene_create(ctx, e == ENGINE_VKRT_GPU ? BENCH_GPU_BACKEND_ROWS : NULL, &d, &c->scene[e],
+                                           c->gpu_skipped, sizeof c->gpu_skipped, c->report->error,
+                                           sizeof c->report->error);
         if (r != VKRT_OK) return r;
         if (c->scene[e]) vkrt_scene_stats_get(c->scene[e], &c->stats[e]);
     }

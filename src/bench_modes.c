@@ -361,8 +361,8 @@ vkrt_result bench_modes_run(const bench_options *o, bench_report *out)
         vkrt_context *ctx = k ? m.cpu : m.gpu;
         if (!ctx) continue;
         vkrt_scene_desc d = bench_scene_desc(&m.source);
-        r = bench_scene_create(ctx, k ? NULL : "the GPU backend was", &d, &m.scene[k], m.gpu_skipped, sizeof m.gpu_skipped, out->error,
-                               sizeof out->error);
+        r = bench_scene_create(ctx, k ? NULL : BENCH_GPU_BACKEND_ROWS, &d, &m.scene[k], m.gpu_skipped,
+                               sizeof m.gpu_skipped, out->error, sizeof out->error);
     }
     vkrt_scene_stats s = { 0 };
     if (r == VKRT_OK) vkrt_scene_stats_get(m.scene[1], &s);

@@ -30,6 +30,7 @@ void bench_scene_free(bench_scene *s);
  * is not a failure of the run: *out_scene is then NULL, the call returns VKRT_OK and skipped
  * (skipped_size bytes) says "<gpu_rows> not run: why", and the run goes on without those rows.
  * Any other failure returns its code with error saying what failed. */
+#define BENCH_GPU_BACKEND_ROWS "the GPU backend was" /* gpu_rows where a run has one GPU scene */
 vkrt_result bench_scene_create(vkrt_context *ctx, const char *gpu_rows, const vkrt_scene_desc *desc,
                                vkrt_scene **out_scene, char *skipped, size_t skipped_size, char *error,
                                size_t error_size);

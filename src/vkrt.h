@@ -280,9 +280,9 @@ typedef struct vkrt_scene_stats {
     uint64_t traversal_bytes;      /* the arrays a ray's traversal reads, what to set against
                                       another tracer's acceleration structure: GPU backend, the
                                       4-wide BVH and its triangles (40 bytes each) on the device
-                                      (the binary nodes and triangles where
-                                      the scene keeps to them: split, or beyond the wide BVH's
-                                      limits); CPU backend, its nodes and triangles */
+                                      (the binary nodes and triangles where the scene keeps to
+                                      them: split, or beyond the wide BVH's limits); CPU backend,
+                                      its nodes and triangles */
 } vkrt_scene_stats;
 
 vkrt_result vkrt_scene_stats_get(const vkrt_scene *scene, vkrt_scene_stats *out_stats);
