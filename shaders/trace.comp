@@ -496,28 +496,42 @@ void finish_buffer_rays_wide()
      * triangle into its hit once: a finished hit holds prim_id, not the triangle. */
     if (unfinished != 0u) return;
     uint slot = gl_WorkGroupID.x * VKRT_TRACE_GROUP_SIZE + gl_LocalInvocationIndex;
+    /* Misses first, every ray of the slot written as one, and the rays that hit listed; then
+     * the hits alone: lavapipe runs an `if`'s body for all eight lanes whatever they need, but
+     * a loop only as often as its busiest lane, and most rays of a view miss (71% of the
+     * primary rays of dragon_200k; 2% fewer instructions a primary-ray trace). */
+    uint hit_k[WIDE_RAYS], hit_tri[WIDE_RAYS];
+    uint hits = 0u;
     for (uint k = 0u; k < WIDE_RAYS; k++) {
         uint index = wide_ray_index(slot, k);
         if (index >= p.tile_width) break;
         uint tri_index = load_wide_hit_tri(index);
-        vkrt_gpu_hit h = vkrt_gpu_hit(-1.0, NO_PRIM, 0.0, 0.0);
-        if (tri_index != NO_PRIM) {
-            /* From the wide arrays: lavapipe reads the triangle array (a storage buffer) a lane
-             * and a word at a time, 8% of a primary-ray trace. */
-            bool last;
-            vkrt_gpu_tri tri = load_wide_tri(tri_index, last);
-            ray r;
-            load_wide_ray(index, r);
-            hit again = hit(r.tmax, 0.0, 0.0, NO_PRIM, NO_PRIM);
-            test_triangle_data(r, tri_index, tri, again);
-            h = vkrt_gpu_hit(again.t, RAYGEN == VKRT_GPU_RAYGEN_BUFFER ? tri.prim_id : tri_index, again.u, again.v);
+        /* Written at the next free entry whether it hits or not, so that the store is the same
+         * for every lane; only a hit moves past it. */
+        hit_k[hits] = k;
+        hit_tri[hits] = tri_index;
+        hits += tri_index != NO_PRIM ? 1u : 0u;
+        store_wide_hit(index, vkrt_gpu_hit(-1.0, NO_PRIM, 0.0, 0.0));
+    }
+    for (uint i = 0u; i < hits; i++) {
+        uint index = wide_ray_index(slot, hit_k[i]);
+        uint tri_index = hit_tri[i];
+        /* From the wide arrays: lavapipe reads the triangle array (a storage buffer) a lane and
+         * a word at a time, 8% of a primary-ray trace. */
+        bool last;
+        vkrt_gpu_tri tri = load_wide_tri(tri_index, last);
+        ray r;
+        load_wide_ray(index, r);
+        hit again = hit(r.tmax, 0.0, 0.0, NO_PRIM, NO_PRIM);
+        test_triangle_data(r, tri_index, tri, again);
+        vkrt_gpu_hit h =
+            vkrt_gpu_hit(again.t, RAYGEN == VKRT_GPU_RAYGEN_BUFFER ? tri.prim_id : tri_index, again.u, again.v);
 #ifdef VKRT_HAS_FLOAT64
-            /* finish_ray_hit's refinement, from the ray as read (r holds the buffer's origin,
-             * direction and bounds as given, tmax 0 as infinity). */
-            if (RAYGEN == VKRT_GPU_RAYGEN_BUFFER)
-                h.t = refine_hit_distance(dvec3(r.origin), dvec3(r.dir), double(r.tmin), double(r.tmax), tri, h.t);
+        /* finish_ray_hit's refinement, from the ray as read (r holds the buffer's origin,
+         * direction and bounds as given, tmax 0 as infinity). */
+        if (RAYGEN == VKRT_GPU_RAYGEN_BUFFER)
+            h.t = refine_hit_distance(dvec3(r.origin), dvec3(r.dir), double(r.tmin), double(r.tmax), tri, h.t);
 #endif
-        }
         store_wide_hit(index, h);
     }
 }

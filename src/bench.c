@@ -255,7 +255,10 @@ static vkrt_result run_configs(bench *b)
                                      t ? VKRT_TRAVERSAL_NAIVE : VKRT_TRAVERSAL_BVH,
                                      i ? VKRT_INTERSECTOR_MOLLER_TRUMBORE : VKRT_INTERSECTOR_WATERTIGHT,
                                      p ? VKRT_PRECISION_DOUBLE : VKRT_PRECISION_FLOAT };
-                        if (m ? !b->cpu : !b->scenes[0][0]) continue;         /* backend not run */
+                        /* The CPU context exists whatever --backend says (it renders the
+                         * reference); its rows run only where asked for. */
+                        if (m ? !b->cpu || b->o->backend == VKRT_BACKEND_GPU : !b->scenes[0][0])
+                            continue; /* backend not run */
                         if (p && !m) continue;                                 /* doubles: CPU only */
                         if (t && (k || !naive)) continue; /* naive ignores the builder; too slow */
                         all[n++] = c;

@@ -99,14 +99,36 @@ static vkrt_result write_piece_table(vk_context *vk, gpu_scene *s)
     return r;
 }
 
-/* The wide traversal's texel buffers, or placeholders where the scene is split or the wide
- * BVH does not fit the traversal's stack or the device's texel buffer limit. */
+/* Both wide texel buffers, `usable` (else a texel each, placeholders for the bindings). */
+static vkrt_result create_wide_buffers(vk_context *vk, const wide_arrays *w, bool usable, gpu_scene *out)
+{
+    vkrt_result r = vk_texel_buffer_create(vk, w->node_texels, usable ? w->node_count * VKRT_WIDE_NODE_TEXELS : 0,
+                                           "vkrt wide BVH", &out->wide_nodes);
+    if (r == VKRT_OK)
+        r = vk_texel_buffer_create(vk, w->tri_texels, usable ? (uint32_t)w->tri_texel_count : 0, "vkrt wide triangles",
+                                   &out->trace_tris);
+    if (r != VKRT_OK) {
+        vk_texel_buffer_destroy(vk, &out->wide_nodes);
+        vk_texel_buffer_destroy(vk, &out->trace_tris);
+    }
+    return r;
+}
+
+/* The wide traversal's texel buffers, or placeholders where the wide BVH does not fit the
+ * traversal's stack, the device's texel buffer limit or its memory. A split scene (whose
+ * triangles exceed one storage buffer) has them too: a texel buffer's limit is in texels (2^27
+ * on lavapipe, 2.5 a triangle), not the storage buffer range, and the binary BVH it was traced
+ * through before was 2.3x slower on primary rays of the 1e7-triangle procedural scene, 5x on
+ * AO rays. The wide arrays only speed the traversal up: a scene whose device memory has no room
+ * for them keeps to the binary BVH (as one beyond their limits does), with a warning, rather
+ * than failing; on lavapipe's 2 GiB heap that is a scene of about 14 million triangles (151
+ * bytes each with them, 96 without). */
 static vkrt_result upload_wide(vk_context *vk, const bvh *b, const vkrt_gpu_tri *tris, gpu_scene *out)
 {
     wide_arrays w = { 0 };
     vkrt_result r = VKRT_OK;
     const double t0 = core_now_ms();
-    if (!out->split_shift && !vk->no_wide_traversal) r = wide_pack(vk->core, b, tris, &w);
+    if (!vk->no_wide_traversal) r = wide_pack(vk->core, b, tris, &w);
     out->wide_pack_ms = core_now_ms() - t0;
     if (r != VKRT_OK) return r;
     const uint64_t texel_limit = vk->properties.limits.maxTexelBufferElements;
@@ -115,12 +137,18 @@ static vkrt_result upload_wide(vk_context *vk, const bvh *b, const vkrt_gpu_tri 
     const bool usable = w.node_count && wide_traversal_fits(w.depth, w.tri_count) &&
                         (uint64_t)w.node_count * VKRT_WIDE_NODE_TEXELS <= texel_limit &&
                         w.tri_texel_count <= texel_limit && 4ull * VKRT_RAY_CHUNK <= texel_limit;
-    r = vk_texel_buffer_create(vk, w.node_texels, usable ? w.node_count * VKRT_WIDE_NODE_TEXELS : 0, "vkrt wide BVH",
-                               &out->wide_nodes);
-    if (r == VKRT_OK)
-        r = vk_texel_buffer_create(vk, w.tri_texels, usable ? (uint32_t)w.tri_texel_count : 0, "vkrt wide triangles",
-                                   &out->trace_tris);
-    out->wide = r == VKRT_OK && usable;
+    r = create_wide_buffers(vk, &w, usable, out);
+    if (r == VKRT_ERROR_OUT_OF_DEVICE_MEMORY && usable) {
+        core_log(vk->core, VKRT_LOG_WARN,
+                 "the 4-wide BVH of %u triangles (%llu bytes) does not fit the device memory left; the scene is "
+                 "traced through its binary BVH",
+                 w.tri_count,
+                 (unsigned long long)(((uint64_t)w.node_count * VKRT_WIDE_NODE_TEXELS + w.tri_texel_count) * 16u));
+        r = create_wide_buffers(vk, &w, false, out);
+        if (r == VKRT_OK) out->wide = false;
+    } else {
+        out->wide = r == VKRT_OK && usable;
+    }
     wide_arrays_destroy(vk->core, &w);
     return r;
 }
@@ -132,6 +160,7 @@ vkrt_result gpu_scene_upload(vk_context *vk, const bvh *b, const vkrt_gpu_tri *t
     const uint32_t node_count = b->node_count, tri_count = b->tri_count;
     const VkDeviceSize limit = piece_limit(vk);
     const VkDeviceSize node_bytes = (VkDeviceSize)node_count * sizeof *nodes;
+    (void)node_bytes; /* read by the assert alone */
     const VkDeviceSize tri_bytes = (VkDeviceSize)tri_count * sizeof *tris;
     vkrt_result r = VKRT_OK;
     /* The triangles are the largest array (at most 2T - 1 nodes of 32 bytes are fewer bytes than

@@ -281,8 +281,8 @@ typedef struct vkrt_scene_stats {
                                       another tracer's acceleration structure: GPU backend, the
                                       4-wide BVH and its triangles (40 bytes each) on the device
                                       (the binary nodes and triangles where the scene keeps to
-                                      them: split, or beyond the wide BVH's limits); CPU backend,
-                                      its nodes and triangles */
+                                      them: beyond the wide BVH's limits); CPU backend, its nodes
+                                      and triangles */
 } vkrt_scene_stats;
 
 vkrt_result vkrt_scene_stats_get(const vkrt_scene *scene, vkrt_scene_stats *out_stats);

@@ -209,9 +209,10 @@ import csv, sys
 rows = list(csv.DictReader(open(sys.argv[1])))
 assert rows and all(r["scene"] == "procedural-" + r["triangles"] for r in rows), rows[0]
 assert abs(int(rows[0]["triangles"]) - 2000) < 200 and all(int(r["mismatched_pixels"]) == 0 for r in rows), rows
+assert all(r["backend"] == "cpu" for r in rows), [r["backend"] for r in rows]
 PY
-then ok "bench --procedural: about N triangles, named by the count, no mismatched pixel"
-else bad "bench --procedural: about N triangles, named by the count, no mismatched pixel"; fi
+then ok "bench --procedural: about N triangles, named by the count, no mismatched pixel, CPU rows only"
+else bad "bench --procedural: about N triangles, named by the count, no mismatched pixel, CPU rows only"; fi
 # The GPU holds one builder's scene at a time: a million triangles take about 145 MB on the
 # device with the SAH BVH and 175 MB with the midpoint one, so 250 MiB hold either but not both
 # (two at once once overflowed lavapipe's 2 GiB heap at 1e7 triangles, and the bench failed).
@@ -222,9 +223,10 @@ import csv, sys
 rows = list(csv.DictReader(open(sys.argv[1])))
 gpu = {r["builder"] for r in rows if r["backend"] == "gpu"}
 assert gpu == {"sah", "midpoint"}, gpu
+assert all(r["backend"] == "gpu" for r in rows), [r["backend"] for r in rows]
 PY
-then ok "bench --device-memory 250: both builders' GPU rows"
-else bad "bench --device-memory 250: both builders' GPU rows"; fi
+then ok "bench --device-memory 250: both builders' GPU rows, and (--backend gpu) no CPU row"
+else bad "bench --device-memory 250: both builders' GPU rows, and (--backend gpu) no CPU row"; fi
 # A scene beyond the device's memory skips the GPU rows with a note; the CPU rows still run.
 expect "bench --device-memory 1 skips the GPU" 0 "$vkrt" bench --quick --procedural 20000 --device-memory 1 \
   --csv "$tmp/no_gpu.csv"

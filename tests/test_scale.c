@@ -17,6 +17,7 @@
 
 static vkrt_context *gpu;
 static unsigned log_errors;
+static unsigned binary_fallbacks; /* warnings that a scene keeps to its binary BVH */
 
 static void on_log(void *user, vkrt_log_level level, const char *message)
 {
@@ -24,6 +25,7 @@ static void on_log(void *user, vkrt_log_level level, const char *message)
     if (level <= VKRT_LOG_WARN) {
         fprintf(stderr, "  [vkrt %s] %s\n", level == VKRT_LOG_ERROR ? "error" : "warning", message);
         if (strstr(message, "validation")) log_errors++;
+        if (strstr(message, "traced through its binary BVH")) binary_fallbacks++;
     }
 }
 
@@ -127,6 +129,11 @@ static void split_scene_renders_as_one_buffer(void)
     CHECK_EQ_U64(ss.device_buffers, 4 + (ss.nodes + 1023) / 1024);
     CHECK_MSG(ss.device_bytes >= ss.node_bytes + ss.triangle_bytes && ss.device_bytes < ws.device_bytes + (64 << 10),
               "split device bytes %" PRIu64 " (one buffer: %" PRIu64 ")", ss.device_bytes, ws.device_bytes);
+    /* The split scene is traced through the wide BVH as the whole one is (its arrays are texel
+     * buffers, which the storage buffer range does not bound). */
+    CHECK_MSG(ss.traversal_bytes == ws.traversal_bytes && ws.traversal_bytes < ws.node_bytes + ws.triangle_bytes,
+              "traversal bytes: split %" PRIu64 ", one buffer %" PRIu64 " (binary arrays %" PRIu64 ")",
+              ss.traversal_bytes, ws.traversal_bytes, ws.node_bytes + ws.triangle_bytes);
     for (vkrt_traversal t = VKRT_TRAVERSAL_BVH; t <= VKRT_TRAVERSAL_NAIVE; t++) {
         for (vkrt_mode m = VKRT_MODE_NORMAL; m <= VKRT_MODE_UV; m++) {
             vkrt_render_desc d = { .width = 48, .height = 40, .mode = m, .traversal = t };
@@ -158,13 +165,10 @@ static void split_scene_renders_as_one_buffer(void)
             vkrt_trace_desc td = { .traversal = t, .any_hit = any };
             CHECK(vkrt_trace_rays(gpu, split, &td, rays, RAYS, ha) == VKRT_OK);
             CHECK(vkrt_trace_rays(gpu, whole, &td, rays, RAYS, hb) == VKRT_OK);
-            /* Closest hits are the same bits; an any-hit query may be answered by another
-             * triangle where the traversals differ (a split scene keeps to the binary BVH), but
-             * never with a miss for a hit. */
+            /* The same bits, any hits too: both scenes go through the same wide BVH (or, naive,
+             * the same triangles in the same order). */
             size_t differ = 0;
-            for (int i = 0; i < RAYS; i++)
-                differ += any ? (ha[i].prim_id == VKRT_NO_HIT) != (hb[i].prim_id == VKRT_NO_HIT)
-                              : memcmp(&ha[i], &hb[i], sizeof ha[i]) != 0;
+            for (int i = 0; i < RAYS; i++) differ += memcmp(&ha[i], &hb[i], sizeof ha[i]) != 0;
             CHECK_MSG(differ == 0, "trace_rays (any hit %d, traversal %d): %zu rays differ", any, (int)t, differ);
         }
     free(rays);
@@ -641,6 +645,64 @@ static void small_memory_budget_fails_cleanly(void)
     CHECK_MSG(live_blocks == 0, "%ld host blocks leaked", live_blocks);
 }
 
+/* A budget that holds the bunny's binary BVH and triangles but not its wide BVH as well: the
+ * scene is made, with a warning, and traced through the binary BVH, hits equal to those of
+ * the same scene with room for both. */
+static void wide_bvh_beyond_the_budget_falls_back(void)
+{
+    vkrt_context *ctx = counted_context();
+    if (!ctx) return;
+    warm_up(ctx);
+    const VkDeviceSize held = ctx->vk->memory_in_use;
+    vkrt_result r;
+    ctx->vk->no_wide_traversal = true;
+    vkrt_scene *binary = bunny_scene(ctx, 0, &r);
+    ctx->vk->no_wide_traversal = false;
+    const VkDeviceSize binary_bytes = ctx->vk->memory_in_use - held;
+    vkrt_scene *both = bunny_scene(ctx, 0, &r);
+    const VkDeviceSize both_bytes = ctx->vk->memory_in_use - held - binary_bytes;
+    CHECK_MSG(binary && both && both_bytes > binary_bytes, "scenes: %s (%llu and %llu bytes)",
+              vkrt_context_last_error(ctx), (unsigned long long)binary_bytes, (unsigned long long)both_bytes);
+    const unsigned warned = binary_fallbacks;
+    ctx->vk->memory_budget = ctx->vk->memory_in_use + binary_bytes + (both_bytes - binary_bytes) / 2;
+    vkrt_scene *s = bunny_scene(ctx, 0, &r);
+    ctx->vk->memory_budget = 0;
+    CHECK_MSG(r == VKRT_OK && s, "scene with room for its binary BVH alone: %s", vkrt_context_last_error(ctx));
+    CHECK_EQ_U64(binary_fallbacks, warned + 1);
+    if (s && both) {
+        vkrt_scene_stats fell, wide;
+        vkrt_scene_stats_get(s, &fell);
+        vkrt_scene_stats_get(both, &wide);
+        CHECK_MSG(fell.traversal_bytes == fell.node_bytes + fell.triangle_bytes &&
+                      wide.traversal_bytes < wide.node_bytes + wide.triangle_bytes,
+                  "traversal bytes %" PRIu64 " (wide scene %" PRIu64 ")", fell.traversal_bytes, wide.traversal_bytes);
+        enum { RAYS = 2000 };
+        vkrt_ray *rays = malloc(RAYS * sizeof *rays);
+        vkrt_hit *ha = malloc(RAYS * sizeof *ha), *hb = malloc(RAYS * sizeof *hb);
+        for (int i = 0; rays && i < RAYS; i++) {
+            float u = (float)i / RAYS, ang = 6.2831853f * u * 23.0f;
+            rays[i] = (vkrt_ray){ .origin = { 1.5f * cosf(ang), 0.6f * (2.0f * u - 1.0f), 1.5f * sinf(ang) },
+                                  .dir = { -cosf(ang), 0.1f * sinf(7 * ang), -sinf(ang) } };
+        }
+        CHECK(rays && ha && hb && vkrt_trace_rays(ctx, s, NULL, rays, RAYS, ha) == VKRT_OK &&
+              vkrt_trace_rays(ctx, both, NULL, rays, RAYS, hb) == VKRT_OK);
+        size_t differ = 0, hits = 0;
+        for (int i = 0; rays && ha && hb && i < RAYS; i++) {
+            differ += memcmp(&ha[i], &hb[i], sizeof ha[i]) != 0;
+            hits += ha[i].prim_id != VKRT_NO_HIT;
+        }
+        CHECK_MSG(differ == 0 && hits > RAYS / 4, "%zu of %d hits differ (%zu hit)", differ, RAYS, hits);
+        free(rays);
+        free(ha);
+        free(hb);
+    }
+    vkrt_scene_destroy(s);
+    vkrt_scene_destroy(both);
+    vkrt_scene_destroy(binary);
+    CHECK_EQ_U64(ctx->vk->memory_in_use, held);
+    vkrt_context_destroy(ctx);
+}
+
 /* Device allocation N fails (N = 1, 2, ... until the call succeeds) in creating a split scene
  * (64 KiB buffers: eight pieces and a piece table) and in every kind of render and trace: each
  * failure is VKRT_ERROR_OUT_OF_DEVICE_MEMORY with a message, and leaves the host blocks, the
@@ -651,7 +713,7 @@ static void every_failed_device_allocation_is_out_of_device_memory(void)
     if (!ctx) return;
     warm_up(ctx);
     vk_context *vk = ctx->vk;
-    uint32_t n = 1;
+    uint32_t n = 1, wide_fallbacks = 0;
     vkrt_scene *s = NULL;
     for (;; n++) {
         const long blocks = live_blocks;
@@ -665,6 +727,19 @@ static void every_failed_device_allocation_is_out_of_device_memory(void)
             CHECK_MSG(r == VKRT_OK, "scene with %u allocations: %s", n - 1, vkrt_context_last_error(ctx));
             break;
         }
+        if (r == VKRT_OK && s) {
+            /* The failed allocation was one of the wide BVH's: the scene keeps to the binary
+             * one, which is then what its traversal reads. */
+            vkrt_scene_stats st;
+            vkrt_scene_stats_get(s, &st);
+            CHECK_MSG(st.traversal_bytes >= st.node_bytes + st.triangle_bytes, "scene, device allocation %u failed: "
+                      "traced through %" PRIu64 " bytes, the binary arrays' %" PRIu64, n, st.traversal_bytes,
+                      st.node_bytes + st.triangle_bytes);
+            wide_fallbacks++;
+            vkrt_scene_destroy(s);
+            s = NULL;
+            continue;
+        }
         CHECK_MSG(r == VKRT_ERROR_OUT_OF_DEVICE_MEMORY && !s, "scene, device allocation %u failed: %s", n,
                   vkrt_result_string(r));
         CHECK_MSG(strstr(vkrt_context_last_error(ctx), "out of device memory") != NULL, "message: %s",
@@ -674,7 +749,11 @@ static void every_failed_device_allocation_is_out_of_device_memory(void)
         vkrt_scene_destroy(s);
         s = NULL;
     }
-    fprintf(stderr, "  split scene: %u device allocations, each failure clean\n", n - 1);
+    /* The wide BVH's two buffers (and their staging buffers, on a device that needs them)
+     * fall back; every other allocation fails the call. */
+    CHECK_MSG(wide_fallbacks >= 2, "%u failed allocations fell back to the binary BVH", wide_fallbacks);
+    fprintf(stderr, "  split scene: %u device allocations, each failure clean (%u of them the wide BVH's, which "
+                    "fall back to the binary BVH)\n", n - 1, wide_fallbacks);
     for (size_t k = 0; s && k < sizeof scene_ops / sizeof scene_ops[0]; k++) {
         for (n = 1;; n++) {
             const long blocks = live_blocks;
@@ -829,6 +908,7 @@ int main(void)
     RUN(smallest_submissions_give_identical_results);
     RUN(progress_cancels_within_one_submission);
     RUN(small_memory_budget_fails_cleanly);
+    RUN(wide_bvh_beyond_the_budget_falls_back);
     RUN(every_failed_device_allocation_is_out_of_device_memory);
     RUN(lost_device_is_reported_and_final);
     RUN(every_failed_host_allocation_is_out_of_memory);
