@@ -118,7 +118,7 @@ static vkrt_result create_wide_buffers(vk_context *vk, const wide_arrays *w, boo
  * traversal's stack, the device's texel buffer limit or its memory. A split scene (whose
  * triangles exceed one storage buffer) has them too: a texel buffer's limit is in texels (2^27
  * on lavapipe, 2.5 a triangle), not the storage buffer range, and the binary BVH it was traced
- * through before was 2.3x slower on primary rays of the 1e7-triangle procedural scene, 5x on
+ * through before was 2x slower on primary rays of the 1e7-triangle procedural scene, 5x on
  * AO rays. The wide arrays only speed the traversal up: a scene whose device memory has no room
  * for them keeps to the binary BVH (as one beyond their limits does), with a warning, rather
  * than failing; on lavapipe's 2 GiB heap that is a scene of about 14 million triangles (151
