@@ -500,7 +500,7 @@ void finish_buffer_rays_wide()
      * the hits alone: lavapipe runs an `if`'s body for all eight lanes whatever they need, but
      * a loop only as often as its busiest lane, and most rays of a view miss (71% of the
      * primary rays of dragon_200k; 2% fewer instructions a primary-ray trace). */
-    uint hit_k[WIDE_RAYS], hit_tri[WIDE_RAYS];
+    uint hit_index[WIDE_RAYS], hit_tri[WIDE_RAYS];
     uint hits = 0u;
     for (uint k = 0u; k < WIDE_RAYS; k++) {
         uint index = wide_ray_index(slot, k);
@@ -508,13 +508,13 @@ void finish_buffer_rays_wide()
         uint tri_index = load_wide_hit_tri(index);
         /* Written at the next free entry whether it hits or not, so that the store is the same
          * for every lane; only a hit moves past it. */
-        hit_k[hits] = k;
+        hit_index[hits] = index;
         hit_tri[hits] = tri_index;
         hits += tri_index != NO_PRIM ? 1u : 0u;
         store_wide_hit(index, vkrt_gpu_hit(-1.0, NO_PRIM, 0.0, 0.0));
     }
     for (uint i = 0u; i < hits; i++) {
-        uint index = wide_ray_index(slot, hit_k[i]);
+        uint index = hit_index[i];
         uint tri_index = hit_tri[i];
         /* From the wide arrays: lavapipe reads the triangle array (a storage buffer) a lane and
          * a word at a time, 8% of a primary-ray trace. */

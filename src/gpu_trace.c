@@ -138,17 +138,17 @@ static vkrt_result upload_wide(vk_context *vk, const bvh *b, const vkrt_gpu_tri 
                         (uint64_t)w.node_count * VKRT_WIDE_NODE_TEXELS <= texel_limit &&
                         w.tri_texel_count <= texel_limit && 4ull * VKRT_RAY_CHUNK <= texel_limit;
     r = create_wide_buffers(vk, &w, usable, out);
+    bool wide = usable;
     if (r == VKRT_ERROR_OUT_OF_DEVICE_MEMORY && usable) {
         core_log(vk->core, VKRT_LOG_WARN,
                  "the 4-wide BVH of %u triangles (%llu bytes) does not fit the device memory left; the scene is "
                  "traced through its binary BVH",
                  w.tri_count,
                  (unsigned long long)(((uint64_t)w.node_count * VKRT_WIDE_NODE_TEXELS + w.tri_texel_count) * 16u));
+        wide = false;
         r = create_wide_buffers(vk, &w, false, out);
-        if (r == VKRT_OK) out->wide = false;
-    } else {
-        out->wide = r == VKRT_OK && usable;
     }
+    out->wide = r == VKRT_OK && wide;
     wide_arrays_destroy(vk->core, &w);
     return r;
 }

@@ -102,6 +102,21 @@ static float *render(vkrt_context *ctx, vkrt_scene *s, const vkrt_render_desc *d
     return render_stats(ctx, s, d, NULL);
 }
 
+/* `count` rays from a ring about the y axis (radius 1.5, 37 turns as the height climbs from
+ * -0.8 to 0.8), each aimed back across the axis with a wobble: rays from all around through
+ * the bunny's bounding box, most of them hitting it. NULL when out of memory. */
+static vkrt_ray *ring_rays(int count)
+{
+    vkrt_ray *rays = malloc((size_t)count * sizeof *rays);
+    for (int i = 0; rays && i < count; i++) {
+        float u = (float)i / (float)count, ang = 6.2831853f * u * 37.0f;
+        rays[i] = (vkrt_ray){ .origin = { 1.5f * cosf(ang), 0.8f * (2.0f * u - 1.0f), 1.5f * sinf(ang) },
+                              .dir = { -cosf(ang) + 0.2f * sinf(11 * ang), -0.8f * (2.0f * u - 1.0f) * 0.5f,
+                                       -sinf(ang) } };
+    }
+    return rays;
+}
+
 /* The same render of the split and the one-buffer scene, bit for bit. */
 static void check_identical(vkrt_scene *split, vkrt_scene *whole, const vkrt_render_desc *d, const char *what)
 {
@@ -152,15 +167,10 @@ static void split_scene_renders_as_one_buffer(void)
     free(img);
     /* Rays from all around, through the bunny's bounding box: closest and any hit. */
     enum { RAYS = 5000 };
-    vkrt_ray *rays = malloc(RAYS * sizeof *rays);
+    vkrt_ray *rays = ring_rays(RAYS);
     vkrt_hit *ha = malloc(RAYS * sizeof *ha), *hb = malloc(RAYS * sizeof *hb);
-    for (int i = 0; i < RAYS; i++) {
-        float u = (float)i / RAYS, ang = 6.2831853f * u * 37.0f;
-        rays[i] = (vkrt_ray){ .origin = { 1.5f * cosf(ang), 0.8f * (2.0f * u - 1.0f), 1.5f * sinf(ang) },
-                              .dir = { -cosf(ang) + 0.2f * sinf(11 * ang), -0.8f * (2.0f * u - 1.0f) * 0.5f,
-                                       -sinf(ang) } };
-    }
-    for (int any = 0; any < 2; any++)
+    CHECK(rays && ha && hb);
+    for (int any = 0; rays && ha && hb && any < 2; any++)
         for (vkrt_traversal t = VKRT_TRAVERSAL_BVH; t <= VKRT_TRAVERSAL_NAIVE; t++) {
             vkrt_trace_desc td = { .traversal = t, .any_hit = any };
             CHECK(vkrt_trace_rays(gpu, split, &td, rays, RAYS, ha) == VKRT_OK);
@@ -677,13 +687,8 @@ static void wide_bvh_beyond_the_budget_falls_back(void)
                       wide.traversal_bytes < wide.node_bytes + wide.triangle_bytes,
                   "traversal bytes %" PRIu64 " (wide scene %" PRIu64 ")", fell.traversal_bytes, wide.traversal_bytes);
         enum { RAYS = 2000 };
-        vkrt_ray *rays = malloc(RAYS * sizeof *rays);
+        vkrt_ray *rays = ring_rays(RAYS);
         vkrt_hit *ha = malloc(RAYS * sizeof *ha), *hb = malloc(RAYS * sizeof *hb);
-        for (int i = 0; rays && i < RAYS; i++) {
-            float u = (float)i / RAYS, ang = 6.2831853f * u * 23.0f;
-            rays[i] = (vkrt_ray){ .origin = { 1.5f * cosf(ang), 0.6f * (2.0f * u - 1.0f), 1.5f * sinf(ang) },
-                                  .dir = { -cosf(ang), 0.1f * sinf(7 * ang), -sinf(ang) } };
-        }
         CHECK(rays && ha && hb && vkrt_trace_rays(ctx, s, NULL, rays, RAYS, ha) == VKRT_OK &&
               vkrt_trace_rays(ctx, both, NULL, rays, RAYS, hb) == VKRT_OK);
         size_t differ = 0, hits = 0;
