@@ -151,7 +151,7 @@ def mrays_vs_triangles(bench, path):
 
 def builders(bench, embree, path):
     fig, (left, right) = plt.subplots(1, 2, figsize=(10, 4))
-    for builder, colour in (("sah", "tab:blue"), ("midpoint", "tab:gray")):
+    for builder, colour in (("sah", "tab:blue"), ("midpoint", "tab:gray"), ("sbvh", "tab:green")):
         rs = default_rows(bench, "cpu", builder=builder)
         plot_series(left, rs, lambda r: int(r["triangles"]), lambda r: float(r["build_ms"]), colour, f"vkrt {builder}")
         plot_series(right, rs, lambda r: int(r["triangles"]), lambda r: float(r["sah_cost"]), colour, f"vkrt {builder}")

@@ -27,8 +27,9 @@ def main():
         if r["scene"] not in scenes:
             scenes.append(r["scene"])
     head = ("| scene | triangles | SAH build ms | SAH cost | GPU Mrays/s | CPU float Mrays/s | CPU double Mrays/s "
-            "| boxes/ray | tests/ray | midpoint GPU Mrays/s | worst mismatched px | worst depth err |")
-    rule = "|---|---|---|---|---|---|---|---|---|---|---|---|"
+            "| boxes/ray | tests/ray | midpoint GPU Mrays/s | SBVH cost | SBVH build ms | SBVH GPU Mrays/s "
+            "| worst mismatched px | worst depth err |")
+    rule = "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
     if embree:
         head += (" Embree Mrays/s | vkrt CPU/Embree primary | vkrt GPU/Embree primary | vkrt CPU/Embree AO any "
                  "| vkrt GPU/Embree AO any | mismatches vs Embree |")
@@ -48,17 +49,21 @@ def main():
 
         gpu, cpu, dbl, mid = pick("sah", "gpu", "float"), pick("sah", "cpu", "float"), \
             pick("sah", "cpu", "double"), pick("midpoint", "gpu", "float")
+        sbvh = pick("sbvh", "cpu", "float") or pick("sbvh", "gpu", "float")
+        sbvh_gpu = pick("sbvh", "gpu", "float")
         base = cpu or gpu
 
         def rate(r):
             return f"{float(r['mrays_per_s']):.2f}" if r else "-"
 
+        sbvh_cells = (f"{float(sbvh['sah_cost']):.2f} | {float(sbvh['build_ms']):.1f} | {rate(sbvh_gpu)}"
+                      if sbvh else "- | - | -")
         worst_px = max(int(r["mismatched_pixels"]) for r in mine)
         worst_depth = max(float(r["depth_rel_max"]) for r in mine)
         line = (f"| {scene_name(scene)} | {base['triangles']} | {float(base['build_ms']):.1f} "
                 f"| {float(base['sah_cost']):.2f} | {rate(gpu)} | {rate(cpu)} | {rate(dbl)} "
                 f"| {float(base['boxes_per_ray']):.2f} | {float(base['tests_per_ray']):.2f} | {rate(mid)} "
-                f"| {worst_px} | {worst_depth:.2e} |")
+                f"| {sbvh_cells} | {worst_px} | {worst_depth:.2e} |")
         if embree:
             theirs = [r for r in embree if r["scene"] == scene]
 

@@ -141,7 +141,8 @@ static void fill_stats(vkrt_scene *s, const mesh *m, double load_ms)
     bvh_stats bs;
     bvh_compute_stats(&s->bvh, &bs);
     vkrt_scene_stats *st = &s->stats;
-    st->triangles = s->bvh.tri_count;
+    st->triangles = m->tri_count;
+    st->bvh_references = s->bvh.tri_count;
     st->nodes = bs.nodes;
     st->leaves = bs.leaves;
     st->depth = bs.depth;
@@ -231,7 +232,7 @@ vkrt_result vkrt_scene_create(vkrt_context *ctx, const vkrt_scene_desc *desc, vk
     if (!out_scene) return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "out_scene is NULL");
     *out_scene = NULL;
     vkrt_scene_desc d = desc ? *desc : (vkrt_scene_desc){ 0 };
-    if (d.builder > VKRT_BVH_BUILDER_BINNED_SAH)
+    if (d.builder > VKRT_BVH_BUILDER_SPATIAL_SAH)
         return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "vkrt_scene_desc.builder has no valid value (%d)", (int)d.builder);
     /* A lost device refuses at once, before any loading. */
     if (ctx->vk && vk_check_lost(ctx->vk) != VKRT_OK) return VKRT_ERROR_DEVICE_LOST;
@@ -271,9 +272,9 @@ vkrt_result vkrt_scene_create(vkrt_context *ctx, const vkrt_scene_desc *desc, vk
         if ((r = bvh4_collapse(c, &s->bvh, &s->wide)) != VKRT_OK) goto fail;
         s->bvh.build_ms += core_now_ms() - collapse_t0;
     }
-    s->tris = core_alloc_array(c, m.tri_count, sizeof *s->tris);
+    s->tris = core_alloc_array(c, s->bvh.tri_count, sizeof *s->tris);
     if (!s->tris) {
-        r = core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "out of memory packing %u triangles", m.tri_count);
+        r = core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "out of memory packing %u triangles", s->bvh.tri_count);
         goto fail;
     }
     scene_pack_triangles(&m, &s->bvh, s->tris);
@@ -353,12 +354,13 @@ vkrt_result vkrt_scene_triangles_get(const vkrt_scene *scene, float *out_positio
     core *c = &scene->ctx->core;
     core_clear_error(c);
     if (!out_positions) return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "out_positions is NULL");
-    size_t tris = scene->bvh.tri_count;
+    size_t tris = scene->stats.triangles;
     if (out_floats / 9 < tris)
         return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "out_positions holds %zu floats; %zu triangles need %zu",
                          out_floats, tris, tris * 9);
-    /* The packed array is in BVH order; prim_id is each triangle's place in the loaded file. */
-    for (size_t k = 0; k < tris; k++) {
+    /* The packed array is in BVH order; prim_id is each triangle's place in the loaded file.
+     * With spatial splits a triangle is there more than once, each copy the same. */
+    for (size_t k = 0; k < scene->bvh.tri_count; k++) {
         const vkrt_gpu_tri *t = &scene->tris[k];
         float *o = out_positions + (size_t)t->prim_id * 9;
         const vkrt_float3 corners[3] = { t->v0, t->v1, t->v2 };
@@ -491,7 +493,8 @@ static vkrt_result render_lighting(vkrt_context *ctx, vkrt_scene *scene, const v
     const light_table_desc ld = {
         .render_lights = d->lights, .render_light_count = d->light_count, .scene_lights = scene->lights,
         .scene_light_count = scene->light_count, .sky = d->sky, .tris = scene->tris, .tri_count = scene->bvh.tri_count,
-        .surfaces = scene->surfaces, .materials = scene->materials, .scene_radius = scene->radius,
+        .prim_count = (uint32_t)scene->stats.triangles, .surfaces = scene->surfaces, .materials = scene->materials,
+        .scene_radius = scene->radius,
     };
     if ((r = light_table_build(c, &ld, &table)) != VKRT_OK) return r;
     uint32_t features = lighting_features(scene, &table, mode, d->target_error) | d->extra_features;

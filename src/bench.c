@@ -23,6 +23,17 @@
  * within this relative distance (a shared edge, overlapping triangles): as test_reference. */
 #define SAME_POINT_DEPTH 1e-6
 
+/* The builders the table compares, by index: binned SAH (the default, whose scene renders the
+ * reference), the seed's midpoint split, and spatial splits. */
+#define BUILDERS 3
+static const vkrt_bvh_builder builder_at[BUILDERS] = { VKRT_BVH_BUILDER_DEFAULT, VKRT_BVH_BUILDER_MIDPOINT,
+                                                       VKRT_BVH_BUILDER_SPATIAL_SAH };
+
+static int builder_index(vkrt_bvh_builder b)
+{
+    return b == VKRT_BVH_BUILDER_MIDPOINT ? 1 : b == VKRT_BVH_BUILDER_SPATIAL_SAH ? 2 : 0;
+}
+
 typedef struct config {
     vkrt_bvh_builder builder;
     vkrt_backend backend;
@@ -46,7 +57,7 @@ typedef struct bench {
     bench_report *report;
     FILE *out;
     vkrt_context *gpu, *cpu;
-    vkrt_scene *scenes[2][2];  /* [builder: sah, midpoint][backend: gpu, cpu] */
+    vkrt_scene *scenes[BUILDERS][2]; /* [builder: sah, midpoint, sbvh][backend: gpu, cpu] */
     uint32_t width, height, repeat;
     size_t pixels;
     float *image;              /* scratch, one render */
@@ -56,7 +67,11 @@ typedef struct bench {
     char gpu_skipped[1200];    /* why the GPU rows were not run (a scene beyond its limits) */
 } bench;
 
-static const char *builder_name(vkrt_bvh_builder b) { return b == VKRT_BVH_BUILDER_MIDPOINT ? "midpoint" : "sah"; }
+static const char *builder_name(vkrt_bvh_builder b)
+{
+    static const char *const names[BUILDERS] = { "sah", "midpoint", "sbvh" };
+    return names[builder_index(b)];
+}
 static const char *backend_name(vkrt_backend b) { return b == VKRT_BACKEND_CPU ? "cpu" : "gpu"; }
 static const char *traversal_name(vkrt_traversal t) { return t == VKRT_TRAVERSAL_NAIVE ? "naive" : "bvh"; }
 static const char *isect_name(vkrt_intersector i) { return i == VKRT_INTERSECTOR_MOLLER_TRUMBORE ? "mt" : "watertight"; }
@@ -76,7 +91,7 @@ double bench_median(double *values, uint32_t n)
 
 static vkrt_scene *scene_of(const bench *b, const config *c)
 {
-    return b->scenes[c->builder == VKRT_BVH_BUILDER_MIDPOINT][c->backend == VKRT_BACKEND_CPU];
+    return b->scenes[builder_index(c->builder)][c->backend == VKRT_BACKEND_CPU];
 }
 
 static vkrt_context *context_of(const bench *b, const config *c)
@@ -209,20 +224,23 @@ static vkrt_result load_scene(bench *b, int builder, int backend)
     vkrt_context *ctx = backend ? b->cpu : b->gpu;
     if (!ctx) return VKRT_OK;
     vkrt_scene_desc d = bench_scene_desc(&b->source);
-    d.builder = builder ? VKRT_BVH_BUILDER_MIDPOINT : VKRT_BVH_BUILDER_DEFAULT;
-    /* The first GPU scene decides whether the GPU runs at all; the second only its own rows. */
-    const char *gpu_rows = backend ? NULL : builder ? "the GPU rows of the midpoint BVH were" : BENCH_GPU_BACKEND_ROWS;
+    d.builder = builder_at[builder];
+    /* The first GPU scene decides whether the GPU runs at all; the others only their own rows. */
+    const char *gpu_rows = backend        ? NULL
+                           : builder == 1 ? "the GPU rows of the midpoint BVH were"
+                           : builder == 2 ? "the GPU rows of the spatial-split BVH were"
+                                          : BENCH_GPU_BACKEND_ROWS;
     return bench_scene_create(ctx, gpu_rows, &d, &b->scenes[builder][backend], b->gpu_skipped, sizeof b->gpu_skipped,
                               b->report->error, sizeof b->report->error);
 }
 
-/* Both builders' CPU scenes, and the GPU scene of the first: the GPU holds one builder's scene
+/* Every builder's CPU scene, and the GPU scene of the first: the GPU holds one builder's scene
  * at a time (use_gpu_scene), since two of a large scene overflow lavapipe's 2 GiB heap (1e7
  * triangles: 1.0 GB with the SAH BVH, 1.3 GB with the midpoint one). */
 static vkrt_result load_scenes(bench *b)
 {
-    vkrt_result r = load_scene(b, 0, 1);
-    if (r == VKRT_OK) r = load_scene(b, 1, 1);
+    vkrt_result r = VKRT_OK;
+    for (int k = 0; k < BUILDERS && r == VKRT_OK; k++) r = load_scene(b, k, 1);
     if (r == VKRT_OK) r = load_scene(b, 0, 0);
     return r;
 }
@@ -231,10 +249,12 @@ static vkrt_result load_scenes(bench *b)
  * device, its rows are skipped with a note (gpu_skipped) and the scene stays NULL. */
 static vkrt_result use_gpu_scene(bench *b, const config *c)
 {
-    const int k = c->builder == VKRT_BVH_BUILDER_MIDPOINT;
+    const int k = builder_index(c->builder);
     if (c->backend != VKRT_BACKEND_GPU || b->scenes[k][0]) return VKRT_OK;
-    vkrt_scene_destroy(b->scenes[!k][0]);
-    b->scenes[!k][0] = NULL;
+    for (int other = 0; other < BUILDERS; other++) {
+        vkrt_scene_destroy(b->scenes[other][0]);
+        b->scenes[other][0] = NULL;
+    }
     return load_scene(b, k, 0);
 }
 
@@ -243,14 +263,14 @@ static vkrt_result run_configs(bench *b)
     vkrt_scene_stats s;
     vkrt_scene_stats_get(b->scenes[0][1], &s);
     const bool naive = (double)s.triangles * (double)b->pixels <= NAIVE_MAX_TESTS;
-    config all[32];
+    config all[BUILDERS * 16];
     unsigned n = 0;
-    for (int k = 0; k < 2; k++)
+    for (int k = 0; k < BUILDERS; k++)
         for (int m = 0; m < 2; m++)
             for (int t = 0; t < 2; t++)
                 for (int i = 0; i < 2; i++)
                     for (int p = 0; p < 2; p++) {
-                        config c = { k ? VKRT_BVH_BUILDER_MIDPOINT : VKRT_BVH_BUILDER_DEFAULT,
+                        config c = { builder_at[k],
                                      m ? VKRT_BACKEND_CPU : VKRT_BACKEND_GPU,
                                      t ? VKRT_TRAVERSAL_NAIVE : VKRT_TRAVERSAL_BVH,
                                      i ? VKRT_INTERSECTOR_MOLLER_TRUMBORE : VKRT_INTERSECTOR_WATERTIGHT,
@@ -318,7 +338,7 @@ vkrt_result bench_run(const bench_options *o, bench_report *out)
         snprintf(out->error, sizeof out->error, "%s: %s", o->csv_path, vkrt_result_string(r));
     out->rows = b.row_count;
     out->validation_messages = vkrt_context_validation_messages(b.gpu) + vkrt_context_validation_messages(b.cpu);
-    for (int k = 0; k < 2; k++)
+    for (int k = 0; k < BUILDERS; k++)
         for (int m = 0; m < 2; m++) vkrt_scene_destroy(b.scenes[k][m]);
     bench_scene_free(&b.source);
     free(b.rows);

@@ -20,6 +20,8 @@ typedef struct bench_options {
     uint32_t procedural;       /* > 0: instead, a procedural scene of about this many triangles
                                   (bench_scene.h) */
     bool keep_world_coordinates;
+    vkrt_bvh_builder builder;  /* --compare and --modes: the scene's BVH builder (_DEFAULT: binned
+                                  SAH); the configuration table builds every builder's */
     vkrt_camera camera;        /* zero: the default view */
     uint32_t width, height;    /* 0: 512x512 (quick: 64x64) */
     uint32_t repeat;           /* timed renders after the warm-up; 0: 5 (quick: 1) */

@@ -68,7 +68,7 @@ vkrt_result bench_scene_init(bench_scene *s, const bench_options *o, char *error
 
 vkrt_scene_desc bench_scene_desc(const bench_scene *s)
 {
-    vkrt_scene_desc d = { .keep_world_coordinates = s->o->keep_world_coordinates };
+    vkrt_scene_desc d = { .keep_world_coordinates = s->o->keep_world_coordinates, .builder = s->o->builder };
     if (s->o->procedural) {
         d.meshes = &s->mesh;
         d.mesh_count = 1;

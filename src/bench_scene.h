@@ -18,7 +18,7 @@ typedef struct bench_scene {
  * (its label says exactly how many). Returns VKRT_OK, or VKRT_ERROR_OUT_OF_MEMORY
  * with error saying so. */
 vkrt_result bench_scene_init(bench_scene *s, const bench_options *o, char *error, size_t error_size);
-/* What vkrt_scene_create needs for it (the builder left at its default). */
+/* What vkrt_scene_create needs for it, with the options' builder. */
 vkrt_scene_desc bench_scene_desc(const bench_scene *s);
 /* The scene's name in tables and CSV files. */
 const char *bench_scene_name(const bench_scene *s);

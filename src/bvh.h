@@ -15,7 +15,10 @@ typedef struct bvh {
     vkrt_gpu_node *nodes;   /* nodes[0] is the root */
     uint32_t node_count;
     uint32_t *tri_order;    /* tri_order[k]: mesh triangle stored at position k */
-    uint32_t tri_count;
+    uint32_t tri_count;     /* positions: the mesh's triangles, and with spatial splits their
+                               duplicates */
+    bool spatial_splits;    /* a triangle may be in several leaves, each box bounding the part
+                               of it in the leaf (bvh_build_sbvh) */
     uint32_t depth;         /* edges on the longest root-to-leaf path, <= VKRT_MAX_BVH_DEPTH */
     double build_ms;
 } bvh;
@@ -36,6 +39,7 @@ vkrt_result bvh_build(core *c, const mesh *m, const bvh_build_desc *desc, bvh *o
 /* The builders behind bvh_build(); each fills out->nodes, node_count, tri_order, depth. */
 vkrt_result bvh_build_midpoint(core *c, const mesh *m, const bvh_build_desc *desc, bvh *out);
 vkrt_result bvh_build_sah(core *c, const mesh *m, const bvh_build_desc *desc, bvh *out);
+vkrt_result bvh_build_sbvh(core *c, const mesh *m, const bvh_build_desc *desc, bvh *out);
 
 typedef struct bvh_stats {
     uint64_t nodes, leaves;
@@ -50,7 +54,9 @@ void bvh_compute_stats(const bvh *b, bvh_stats *out);
 
 /* Checks the invariants every builder must keep: each triangle in exactly one leaf, each
  * child box inside its parent, each leaf box enclosing its triangles' corners, children
- * in range, depth within VKRT_MAX_BVH_DEPTH. Returns true when all hold; otherwise writes
+ * in range, depth within VKRT_MAX_BVH_DEPTH. With spatial splits: each triangle in at least
+ * one leaf and at most once in each, every point of it inside the box of one of its leaves
+ * (sampled on a barycentric grid). Returns true when all hold; otherwise writes
  * what failed into message (of message_size bytes). */
 bool bvh_validate(const bvh *b, const mesh *m, char *message, size_t message_size);
 

@@ -22,24 +22,33 @@ static void free_all(bvh_build_state *b)
 vkrt_result bvh_build_begin(bvh_build_state *b, core *c, const mesh *m, const bvh_build_desc *desc,
                             size_t ref_size, size_t tri_offset, bvh *out)
 {
+    return bvh_build_begin_capacity(b, c, m, desc, ref_size, tri_offset, m->tri_count, out);
+}
+
+vkrt_result bvh_build_begin_capacity(bvh_build_state *b, core *c, const mesh *m, const bvh_build_desc *desc,
+                                     size_t ref_size, size_t tri_offset, uint32_t ref_capacity, bvh *out)
+{
     memset(out, 0, sizeof *out);
     memset(b, 0, offsetof(bvh_build_state, stack)); /* the stack is written before it is read */
     uint32_t n = m->tri_count;
     if (n == 0) return core_fail(c, VKRT_ERROR_EMPTY_SCENE, "the mesh has no triangles to build a BVH over");
-    if (n > UINT32_MAX / 2)
-        return core_fail(c, VKRT_ERROR_LIMIT, "%u triangles: a BVH holds at most %u", n, UINT32_MAX / 2);
+    if (ref_capacity < n) ref_capacity = n;
+    if (ref_capacity > UINT32_MAX / 2)
+        return core_fail(c, VKRT_ERROR_LIMIT, "%u triangle references: a BVH holds at most %u", ref_capacity,
+                         UINT32_MAX / 2);
     b->c = c;
     b->tri_count = n;
+    b->ref_cap = ref_capacity;
     b->ref_size = ref_size;
     b->tri_offset = tri_offset;
-    b->node_cap = 2 * n - 1;
+    b->node_cap = 2 * ref_capacity - 1;
     b->progress = desc ? desc->progress : NULL;
     b->progress_user = desc ? desc->progress_user : NULL;
     b->report_step = n / BVH_BUILD_PROGRESS_STEPS ? n / BVH_BUILD_PROGRESS_STEPS : 1;
 
-    b->refs = core_alloc_array(c, n, ref_size);
+    b->refs = core_alloc_array(c, ref_capacity, ref_size);
     b->nodes = core_alloc_array(c, b->node_cap, sizeof *b->nodes);
-    b->order = core_alloc_array(c, n, sizeof *b->order);
+    b->order = core_alloc_array(c, ref_capacity, sizeof *b->order);
     if (!b->refs || !b->nodes || !b->order) {
         vkrt_result r = core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "out of memory building the BVH of %u triangles", n);
         free_all(b);
@@ -48,8 +57,8 @@ vkrt_result bvh_build_begin(bvh_build_state *b, core *c, const mesh *m, const bv
     /* The references and the order are written whole at once. Not the nodes: a parallel
      * build leaves holes in them, which huge pages would fill (on the 1e7-triangle scene that
      * cost more system time than the faults it saved). */
-    core_advise_huge_pages(b->refs, (size_t)n * ref_size);
-    core_advise_huge_pages(b->order, (size_t)n * sizeof *b->order);
+    core_advise_huge_pages(b->refs, (size_t)ref_capacity * ref_size);
+    core_advise_huge_pages(b->order, (size_t)ref_capacity * sizeof *b->order);
     return VKRT_OK;
 }
 
@@ -90,6 +99,7 @@ void bvh_build_subtree_state(const bvh_build_state *b, uint32_t region, bvh_buil
     memset(sub, 0, offsetof(bvh_build_state, stack));
     sub->c = b->c;
     sub->tri_count = b->tri_count;
+    sub->ref_cap = b->ref_cap;
     sub->refs = b->refs;
     sub->ref_size = b->ref_size;
     sub->tri_offset = b->tri_offset;
@@ -165,9 +175,19 @@ vkrt_result bvh_build_finish(bvh_build_state *b, bvh *out)
             nodes = exact;
         }
     }
+    /* A spatial-split build sized the order for its reference budget. */
+    uint32_t *order = b->order;
+    if (b->tri_count < b->ref_cap) {
+        uint32_t *exact = core_alloc_array(c, b->tri_count, sizeof *exact);
+        if (exact) {
+            memcpy(exact, order, (size_t)b->tri_count * sizeof *exact);
+            core_free(c, order);
+            order = exact;
+        }
+    }
     out->nodes = nodes;
     out->node_count = b->node_count;
-    out->tri_order = b->order;
+    out->tri_order = order;
     out->tri_count = b->tri_count;
     out->depth = b->depth;
     return VKRT_OK;

@@ -45,8 +45,9 @@ typedef struct bvh_build_task {
 
 typedef struct bvh_build_state {
     core *c;
-    uint32_t tri_count;
-    void *refs;                 /* tri_count references of the builder's type */
+    uint32_t tri_count;         /* the mesh's; at the end, the references in leaves */
+    uint32_t ref_cap;           /* references, order entries and half the nodes allocated */
+    void *refs;                 /* ref_cap references of the builder's type */
     size_t ref_size;
     size_t tri_offset;          /* where a reference keeps its triangle index (a uint32_t) */
     vkrt_gpu_node *nodes;       /* node_cap entries (one triangle per leaf at worst) */
@@ -116,6 +117,11 @@ static inline void bvh_build_tri_box(const float *p, float *bmin, float *bmax)
  * the builder's, sized for its partition loop. On failure nothing stays allocated. */
 vkrt_result bvh_build_begin(bvh_build_state *b, core *c, const mesh *m, const bvh_build_desc *desc,
                             size_t ref_size, size_t tri_offset, bvh *out);
+/* bvh_build_begin() with room for ref_capacity references (at least m->tri_count), for a
+ * builder that may reference a triangle from several leaves; the nodes are sized for one
+ * reference a leaf. */
+vkrt_result bvh_build_begin_capacity(bvh_build_state *b, core *c, const mesh *m, const bvh_build_desc *desc,
+                                     size_t ref_size, size_t tri_offset, uint32_t ref_capacity, bvh *out);
 /* Gives the root node the box of root and makes *task the root task, then reports progress 0.
  * Returns false when the progress callback cancels. */
 bool bvh_build_start(bvh_build_state *b, const bvh_build_bounds *root, bvh_build_task *task);

@@ -151,8 +151,7 @@ void bvh_build_sah_binning_empty(sah_binning *b)
     }
 }
 
-/* Empties the bins in use, cheaper than bvh_build_sah_binning_empty() for small nodes. */
-static void binning_clear(sah_binning *b)
+void bvh_build_sah_binning_clear(sah_binning *b)
 {
     for (int a = 0; a < 3; a++) {
         for (uint32_t m = b->used[a]; m; m &= m - 1) {
@@ -353,7 +352,7 @@ static void select_nth(sah_ref *refs, uint32_t lo, uint32_t hi, uint32_t k, int 
     }
 }
 
-static void bounds_of(const sah_ref *refs, uint32_t first, uint32_t count, bvh_build_bounds *b)
+void bvh_build_sah_bounds(const sah_ref *refs, uint32_t first, uint32_t count, bvh_build_bounds *b)
 {
     float4 lo = box_empty_min(), hi = box_empty_max();
     for (const sah_ref *r = refs + first; r < refs + first + count; r++) {
@@ -365,9 +364,7 @@ static void bounds_of(const sah_ref *refs, uint32_t first, uint32_t count, bvh_b
     bvh_build_sah_centroid_bounds(refs + first, refs + first + count, b);
 }
 
-/* The fallback where bins cannot split a node that is too large for a leaf: halves by count
- * along the widest centroid axis. False when all centroids are equal (no split exists). */
-static bool median_split(sah_ref *refs, const bvh_build_task *t, uint32_t *left_count, bvh_build_bounds *left,
+bool bvh_build_sah_median_split(sah_ref *refs, const bvh_build_task *t, uint32_t *left_count, bvh_build_bounds *left,
                          bvh_build_bounds *right)
 {
     int axis = -1;
@@ -382,8 +379,8 @@ static bool median_split(sah_ref *refs, const bvh_build_task *t, uint32_t *left_
     if (axis < 0) return false;
     *left_count = t->count / 2;
     select_nth(refs, t->first, t->first + t->count - 1, t->first + *left_count, axis);
-    bounds_of(refs, t->first, *left_count, left);
-    bounds_of(refs, t->first + *left_count, t->count - *left_count, right);
+    bvh_build_sah_bounds(refs, t->first, *left_count, left);
+    bvh_build_sah_bounds(refs, t->first + *left_count, t->count - *left_count, right);
     return true;
 }
 
@@ -406,8 +403,8 @@ static sah_decision decide_pair(sah_ref *refs, const bvh_build_task *t, const sa
         r[0] = r[1];
         r[1] = tmp;
     }
-    bounds_of(r, 0, 1, left);
-    bounds_of(r, 1, 1, right);
+    bvh_build_sah_bounds(r, 0, 1, left);
+    bvh_build_sah_bounds(r, 1, 1, right);
     return SAH_SPLIT;
 }
 
@@ -437,11 +434,11 @@ void bvh_build_sah_subtree(bvh_build_state *b, sah_ref *refs, bvh_build_task tas
                     bvh_build_sah_split_boxes(bins, &s, &left, &right);
                     left_count = bvh_build_sah_partition(refs + task.first, refs + task.first + task.count, &g, &s, &left, &right);
                 }
-                binning_clear(bins);
+                bvh_build_sah_binning_clear(bins);
             } else if (task.count <= max_leaf) {
                 d = SAH_LEAF;
             }
-            if (d == SAH_MEDIAN && !median_split(refs, &task, &left_count, &left, &right)) d = SAH_LEAF;
+            if (d == SAH_MEDIAN && !bvh_build_sah_median_split(refs, &task, &left_count, &left, &right)) d = SAH_LEAF;
             /* Binning and partitioning share bvh_build_sah_bin_index(), so this never fires;
              * it keeps a future change from looping forever on an empty child. */
             leaf = d == SAH_LEAF || left_count == 0 || left_count == task.count;

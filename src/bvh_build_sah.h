@@ -70,6 +70,8 @@ void bvh_build_sah_refs(const mesh *m, sah_ref *refs, uint32_t first, uint32_t c
 /* The grid of a node with centroid bounds t->cmin, t->cmax; false when no axis can be binned. */
 bool bvh_build_sah_grid(const bvh_build_task *t, sah_grid *g);
 void bvh_build_sah_binning_empty(sah_binning *b);
+/* Empties the bins in use, cheaper than bvh_build_sah_binning_empty() for small nodes. */
+void bvh_build_sah_binning_clear(sah_binning *b);
 /* Adds references [r, end) to b. */
 void bvh_build_sah_bin(const sah_ref *r, const sah_ref *end, const sah_grid *g, sah_binning *b);
 /* Adds the bins of from to into. */
@@ -90,6 +92,13 @@ void bvh_build_sah_split_boxes(const sah_binning *b, const sah_split *s, bvh_bui
  * positions already passed. */
 uint32_t bvh_build_sah_partition(sah_ref *first, sah_ref *end, const sah_grid *g, const sah_split *s,
                                  bvh_build_bounds *left, bvh_build_bounds *right);
+/* Sets b (boxes and centroid bounds) to the bounds of references [first, first + count). */
+void bvh_build_sah_bounds(const sah_ref *refs, uint32_t first, uint32_t count, bvh_build_bounds *b);
+/* The fallback where bins cannot split a node that is too large for a leaf: halves task t's
+ * references by count along the widest centroid axis. False when all centroids are equal (no
+ * split exists). */
+bool bvh_build_sah_median_split(sah_ref *refs, const bvh_build_task *t, uint32_t *left_count, bvh_build_bounds *left,
+                                bvh_build_bounds *right);
 /* Sets b's centroid bounds (cmin, cmax) to those of references [r, end). */
 void bvh_build_sah_centroid_bounds(const sah_ref *r, const sah_ref *end, bvh_build_bounds *b);
 /* Builds the subtree of task serially with state b (whose nodes and references it shares).

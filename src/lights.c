@@ -57,6 +57,19 @@ static bool black(const float v[3])
     return v[0] == 0.0f && v[1] == 0.0f && v[2] == 0.0f;
 }
 
+/* The power of the triangle at position t of the BVH order as a light, 0 where it emits nothing
+ * or, with `seen` (one flag per prim_id), where an earlier position held the same triangle (a
+ * spatial split's copy): a triangle is one light however many leaves hold it. */
+static float position_power(const light_table_desc *d, uint32_t t, uint8_t *seen)
+{
+    const vkrt_gpu_material *m = &d->materials[d->surfaces[d->tris[t].prim_id].material];
+    float p = sh_emitter_power(&d->tris[t], m->emissive);
+    if (!(p > 0.0f) || !seen) return p;
+    if (seen[d->tris[t].prim_id]) return 0.0f;
+    seen[d->tris[t].prim_id] = 1;
+    return p;
+}
+
 vkrt_result light_table_build(core *c, const light_table_desc *d, light_table *out)
 {
     memset(out, 0, sizeof *out);
@@ -67,11 +80,15 @@ vkrt_result light_table_build(core *c, const light_table_desc *d, light_table *o
     if (!finite3(d->sky.zenith) || !nonnegative3(d->sky.zenith) || !finite3(d->sky.horizon) ||
         !nonnegative3(d->sky.horizon))
         return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "vkrt_render_desc.sky: colours must be finite and >= 0");
-    uint32_t emitters = 0;
-    for (uint32_t t = 0; t < d->tri_count; t++) {
-        const vkrt_gpu_material *m = &d->materials[d->surfaces[d->tris[t].prim_id].material];
-        if (sh_emitter_power(&d->tris[t], m->emissive) > 0.0f) emitters++;
+    uint8_t *seen = NULL;
+    if (d->tri_count > d->prim_count) {
+        seen = core_calloc_array(c, d->prim_count, 1);
+        if (!seen)
+            return core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "out of memory listing the emitters of %u triangles",
+                             d->prim_count);
     }
+    uint32_t emitters = 0;
+    for (uint32_t t = 0; t < d->tri_count; t++) emitters += position_power(d, t, seen) > 0.0f;
     vkrt_sky sky = d->sky;
     /* Nothing lights the scene: a key light from above the camera's right shoulder (the
      * default camera looks down -z) and a dim sky, so a render of any mesh shows its shape. */
@@ -81,11 +98,14 @@ vkrt_result light_table_build(core *c, const light_table_desc *d, light_table *o
     if (default_rig) sky = (vkrt_sky){ { 0.30f, 0.36f, 0.45f }, { 0.12f, 0.12f, 0.13f } };
     const uint32_t punctual = default_rig ? 1 : d->render_light_count + d->scene_light_count;
     const uint64_t count = (uint64_t)punctual + emitters;
-    if (count > UINT32_MAX - 1)
+    if (count > UINT32_MAX - 1) {
+        core_free(c, seen);
         return core_fail(c, VKRT_ERROR_LIMIT, "%llu lights are more than vkrt supports", (unsigned long long)count);
+    }
     out->lights = core_alloc_array(c, count ? count : 1, sizeof *out->lights);
     double *power = core_alloc_array(c, count ? count : 1, sizeof *power);
     if (!out->lights || !power) {
+        core_free(c, seen);
         core_free(c, power);
         light_table_destroy(c, out);
         return core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "out of memory for a table of %llu lights", (unsigned long long)count);
@@ -99,14 +119,16 @@ vkrt_result light_table_build(core *c, const light_table_desc *d, light_table *o
         power[n] = punctual_entry(&d->render_lights[i], d->scene_radius, &out->lights[n]);
     for (uint32_t i = 0; !default_rig && i < d->scene_light_count; i++, n++)
         power[n] = punctual_entry(&d->scene_lights[i], d->scene_radius, &out->lights[n]);
+    if (seen) memset(seen, 0, d->prim_count);
     for (uint32_t t = 0; t < d->tri_count; t++) {
         const vkrt_gpu_material *m = &d->materials[d->surfaces[d->tris[t].prim_id].material];
-        float p = sh_emitter_power(&d->tris[t], m->emissive);
+        float p = position_power(d, t, seen);
         if (!(p > 0.0f)) continue;
         out->lights[n] = (vkrt_gpu_light){ .type = VKRT_GPU_LIGHT_TRIANGLE, .color = m->emissive, .tri = t,
                                            .area = sh_triangle_area(&d->tris[t]) };
         power[n++] = p;
     }
+    core_free(c, seen);
     double total = 0.0;
     for (uint32_t i = 0; i < n; i++) total += power[i];
     /* Lights of zero power (black ones) are never picked; if all are black, none is. */

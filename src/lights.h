@@ -16,7 +16,9 @@ typedef struct light_table_desc {
     uint32_t scene_light_count;
     vkrt_sky sky;
     const vkrt_gpu_tri *tris;        /* in BVH order */
-    uint32_t tri_count;
+    uint32_t tri_count;              /* positions; more than prim_count where spatial splits put
+                                        a triangle in several leaves (each is one light) */
+    uint32_t prim_count;             /* the mesh's triangles: prim_id < prim_count */
     const vkrt_gpu_surface *surfaces;
     const vkrt_gpu_material *materials;
     float scene_radius;              /* of the scene's bounding sphere: what a directional light

@@ -118,7 +118,7 @@ static const char render_help[] =
     "  --heat nodes|leaves|tris  what heatmap counts per ray\n"
     "  --heat-max N              count at the top of the heat ramp (default: the image maximum)\n"
     "  --backend gpu|cpu         Vulkan compute, or the C reference tracer\n"
-    "  --bvh sah|midpoint        BVH builder\n"
+    "  --bvh sah|sbvh|midpoint   BVH builder (sbvh: with spatial splits)\n"
     "  --max-leaf N              largest SAH leaf (4)\n"
     "  --traverse bvh|naive      naive tests every triangle (identical image, slow)\n"
     "  --isect watertight|mt     triangle test: watertight (Woop et al. 2013) or Moller-Trumbore\n"
@@ -152,7 +152,7 @@ static const char render_help[] =
     "\n";
 
 static const char info_help[] =
-    "usage: vkrt info FILE [--bvh sah|midpoint] [--max-leaf N] [--no-normalize] [--backend gpu]\n"
+    "usage: vkrt info FILE [--bvh sah|sbvh|midpoint] [--max-leaf N] [--no-normalize] [--backend gpu]\n"
     "Loads FILE, builds its BVH on the CPU (no Vulkan device needed) and prints triangles, nodes,\n"
     "leaves, depth, SAH cost, load and build times, bytes, host and device memory per triangle,\n"
     "bounds and the leaf-size histogram.\n"
@@ -160,7 +160,7 @@ static const char info_help[] =
     "options:\n"
     "  --backend gpu             also upload the scene to the device and print the device memory\n"
     "                            it takes and its storage buffers (more than 2: split)\n"
-    "  --bvh sah|midpoint        BVH builder (sah)\n"
+    "  --bvh sah|sbvh|midpoint   BVH builder (sah; sbvh: with spatial splits)\n"
     "  --max-leaf N              largest SAH leaf (4)\n"
     "  --no-normalize            keep world coordinates (bounds as in the file)\n"
     "\n"
@@ -185,7 +185,7 @@ static const char devices_help[] =
 static const char stress_help[] =
     "usage: vkrt stress [--quick] [--backend gpu|cpu] [--isect watertight|mt] [options]\n"
     "Builds meshes in memory (closed meshes with rays at shared edges and vertices, scales 1e-6 to\n"
-    "1e6 and offsets to 1e6, degenerate geometry with both builders, +-0 directions, origins on\n"
+    "1e6 and offsets to 1e6, degenerate geometry with every builder, +-0 directions, origins on\n"
     "surfaces, grazing rays, eyes inside), traces them on each backend with each intersector and\n"
     "compares every ray with the CPU double-precision reference. Prints a table: case, builder,\n"
     "backend, intersector, rays, leaks, mismatches, limit, max relative depth error, BVH depth.\n"
@@ -208,7 +208,7 @@ static const char bench_help[] =
     "usage: vkrt bench [FILE] [--quick] [--csv OUT.csv] [--size WxH] [--repeat N]\n"
     "                  [--compare embree | --modes [--ref-spp N] [--cache DIR]] [options]\n"
     "Renders one view of FILE (the built-in scene when none) with every configuration: backend\n"
-    "(gpu, cpu), BVH builder (sah, midpoint), traversal (bvh; naive where it costs at most 1e8\n"
+    "(gpu, cpu), BVH builder (sah, midpoint, sbvh), traversal (bvh; naive where it costs at most 1e8\n"
     "ray-triangle tests), intersector (watertight, mt) and, on the CPU, precision (float, double).\n"
     "Each row: build time, SAH cost, bytes per triangle, trace time (median after a warm-up; GPU:\n"
     "device time from timestamp queries), total time of the call, Mrays/s, boxes, leaves and\n"
@@ -237,12 +237,14 @@ static const char bench_help[] =
     "  --ref-spp N               the references' samples per pixel (1024; quick: 256)\n"
     "  --cache DIR               where references are kept between runs, keyed by scene and\n"
     "                            settings (~/.cache/vkrt/bench; empty: nowhere)\n"
+    "  --bvh sah|sbvh|midpoint   --compare and --modes: the scene's BVH builder (sah)\n"
     "  --eye, --target, --up, --fov, --no-normalize, --device N, --device-memory MIB,\n"
     "  --threads N, --validation, -q   as for render\n"
     "\n"
     "examples:\n"
     "  vkrt bench                                    the built-in scene, every configuration\n"
     "  vkrt bench bunny.obj --compare embree         vkrt against Embree on the bunny\n"
+    "  vkrt bench bunny.obj --compare embree --bvh sbvh   the same through spatial splits\n"
     "  vkrt bench --modes --csv modes.csv            the lighting modes' time against error\n"
     "  vkrt bench --procedural 1000000               a million procedural triangles\n"
     "  vkrt bench dragon.glb --csv dragon.csv        and the rows as CSV\n"
@@ -455,8 +457,9 @@ static int parse_args(int argc, char **argv, options *o)
         } else if (!strcmp(arg, "--bvh")) {
             NEED_VALUE();
             if (!strcmp(value, "sah")) o->scene.builder = VKRT_BVH_BUILDER_BINNED_SAH;
+            else if (!strcmp(value, "sbvh")) o->scene.builder = VKRT_BVH_BUILDER_SPATIAL_SAH;
             else if (!strcmp(value, "midpoint")) o->scene.builder = VKRT_BVH_BUILDER_MIDPOINT;
-            else return usage_error("unknown BVH builder '%s' (sah, midpoint)", value);
+            else return usage_error("unknown BVH builder '%s' (sah, sbvh, midpoint)", value);
         } else if (!strcmp(arg, "--max-leaf")) {
             NEED_VALUE();
             if (!parse_u32(value, &o->scene.max_leaf_size) || !o->scene.max_leaf_size)
@@ -807,8 +810,13 @@ static int command_info(options *o)
     vkrt_scene_stats s;
     vkrt_scene_stats_get(scene, &s);
     printf("file          %s\n", o->input);
-    printf("builder       %s\n", o->scene.builder == VKRT_BVH_BUILDER_MIDPOINT ? "midpoint" : "sah");
+    printf("builder       %s\n", o->scene.builder == VKRT_BVH_BUILDER_MIDPOINT      ? "midpoint"
+                                  : o->scene.builder == VKRT_BVH_BUILDER_SPATIAL_SAH ? "sbvh"
+                                                                                      : "sah");
     printf("triangles     %" PRIu64 "\n", s.triangles);
+    if (s.bvh_references != s.triangles)
+        printf("references    %" PRIu64 " (spatial splits: %.1f%% more than the triangles)\n", s.bvh_references,
+               100.0 * ((double)s.bvh_references / (double)s.triangles - 1.0));
     printf("nodes         %" PRIu64 "\n", s.nodes);
     printf("leaves        %" PRIu64 "\n", s.leaves);
     printf("depth         %u\n", s.depth);
@@ -922,7 +930,7 @@ static int command_bench(options *o)
     bench_options bo = {
         .context = o->context, .backend = o->context.backend, .input = o->input,
         .procedural = o->procedural, .keep_world_coordinates = o->scene.keep_world_coordinates,
-        .camera = o->render.camera,
+        .builder = o->scene.builder, .camera = o->render.camera,
         .width = o->render.width, .height = o->render.height, .repeat = o->repeat, .quick = o->quick,
         .csv_path = o->csv, .progress = verbosity >= 1 && !getenv("CI"), .reference_spp = o->reference_spp,
         .max_spp = o->max_spp,

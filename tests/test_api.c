@@ -132,6 +132,29 @@ static vkrt_result op_scene_obj(vkrt_context *ctx, long n)
     return scene_op(ctx, n, &(vkrt_scene_desc){ .path = VKRT_TEST_DATA_DIR "/groups.obj" });
 }
 
+/* A lattice of small triangles at several heights and two large ones across it: the
+ * spatial-split builder cuts the large ones, so its BVH holds copies of them. */
+#define ROOM_SMALL 64
+static float room_positions[(ROOM_SMALL + 2) * 9];
+
+static vkrt_mesh_desc room_mesh(void)
+{
+    for (int i = 0; i < ROOM_SMALL; i++) {
+        float x = (float)(i % 8), y = (float)(i / 8), z = 0.1f * (float)(i * 37 % 11);
+        const float t[9] = { x, y, z, x + 0.5f, y, z, x, y + 0.5f, z + 0.2f };
+        memcpy(room_positions + 9 * i, t, sizeof t);
+    }
+    const float large[18] = { 0, 0, 0, 8, 0, 1, 8, 8, 0.5f, 0, 8, 1, 0, 0, 0.2f, 8, 8, 0.3f };
+    memcpy(room_positions + 9 * ROOM_SMALL, large, sizeof large);
+    return (vkrt_mesh_desc){ .positions = room_positions, .vertex_count = (ROOM_SMALL + 2) * 3 };
+}
+
+static vkrt_result op_scene_sbvh(vkrt_context *ctx, long n)
+{
+    vkrt_mesh_desc room = room_mesh();
+    return scene_op(ctx, n, &(vkrt_scene_desc){ .meshes = &room, .mesh_count = 1, .builder = VKRT_BVH_BUILDER_SPATIAL_SAH });
+}
+
 static vkrt_result op_scene_gltf(vkrt_context *ctx, long n)
 {
     return scene_op(ctx, n, &(vkrt_scene_desc){ .path = VKRT_TEST_DATA_DIR "/instanced.gltf" });
@@ -186,10 +209,11 @@ static vkrt_result op_scene_memory(vkrt_context *ctx, long n)
     return scene_op(ctx, n, &(vkrt_scene_desc){ .meshes = meshes, .mesh_count = 2 });
 }
 
-static vkrt_result render_op(vkrt_context *ctx, long n, vkrt_mode mode, const char *save_path)
+static vkrt_result render_op_with(vkrt_context *ctx, long n, vkrt_mode mode, const char *save_path,
+                                  const vkrt_scene_desc *scene)
 {
     vkrt_scene *s = NULL;
-    vkrt_result r = vkrt_scene_create(ctx, &(vkrt_scene_desc){ 0 }, &s);
+    vkrt_result r = vkrt_scene_create(ctx, scene, &s);
     CHECK_MSG(r == VKRT_OK, "%s", vkrt_context_last_error(ctx));
     if (r != VKRT_OK) return VKRT_OK; /* reported; ends the loop */
     float rgba[24 * 16 * 4];
@@ -206,6 +230,11 @@ static vkrt_result render_op(vkrt_context *ctx, long n, vkrt_mode mode, const ch
     disarm();
     vkrt_scene_destroy(s);
     return r;
+}
+
+static vkrt_result render_op(vkrt_context *ctx, long n, vkrt_mode mode, const char *save_path)
+{
+    return render_op_with(ctx, n, mode, save_path, &(vkrt_scene_desc){ 0 });
 }
 
 static vkrt_result op_render(vkrt_context *ctx, long n)
@@ -227,6 +256,14 @@ static vkrt_result op_render_path(vkrt_context *ctx, long n)
 static vkrt_result op_render_shaded(vkrt_context *ctx, long n)
 {
     return render_op(ctx, n, VKRT_MODE_SHADED, NULL);
+}
+
+/* Shading lists the scene's emitters, each triangle once however many leaves hold it. */
+static vkrt_result op_render_shaded_sbvh(vkrt_context *ctx, long n)
+{
+    vkrt_mesh_desc room = room_mesh();
+    return render_op_with(ctx, n, VKRT_MODE_SHADED, NULL,
+                          &(vkrt_scene_desc){ .meshes = &room, .mesh_count = 1, .builder = VKRT_BVH_BUILDER_SPATIAL_SAH });
 }
 
 static char save_dir[] = "/tmp/vkrt_test_api_XXXXXX";
@@ -264,6 +301,7 @@ static void out_of_memory_at_every_cpu_allocation(void)
     oom_every_allocation("scene_create (built-in)", VKRT_BACKEND_CPU, op_scene_builtin);
     oom_every_allocation("scene_create (groups.obj)", VKRT_BACKEND_CPU, op_scene_obj);
     oom_every_allocation("scene_create (instanced.gltf)", VKRT_BACKEND_CPU, op_scene_gltf);
+    oom_every_allocation("scene_create (spatial splits)", VKRT_BACKEND_CPU, op_scene_sbvh);
     oom_every_allocation("scene_create (in-memory meshes)", VKRT_BACKEND_CPU, op_scene_memory);
     oom_every_allocation("scene_create (glTF with PNG textures)", VKRT_BACKEND_CPU, op_scene_textured_gltf);
     oom_every_allocation("scene_create (OBJ with .mtl and a PNG texture)", VKRT_BACKEND_CPU, op_scene_obj_materials);
@@ -273,6 +311,7 @@ static void out_of_memory_at_every_cpu_allocation(void)
     oom_every_allocation("render albedo (CPU)", VKRT_BACKEND_CPU, op_render_albedo);
     oom_every_allocation("render path (CPU)", VKRT_BACKEND_CPU, op_render_path);
     oom_every_allocation("render shaded (CPU)", VKRT_BACKEND_CPU, op_render_shaded);
+    oom_every_allocation("render shaded (CPU, spatial splits)", VKRT_BACKEND_CPU, op_render_shaded_sbvh);
     oom_every_allocation("image_save (.png)", VKRT_BACKEND_CPU, op_save_png);
     oom_every_allocation("image_save (.pfm)", VKRT_BACKEND_CPU, op_save_pfm);
     oom_every_allocation("image_save (.hdr)", VKRT_BACKEND_CPU, op_save_hdr);
@@ -512,6 +551,32 @@ static void export_misuse_returns_invalid_argument(void)
     CHECK(vkrt_scene_triangles_get(s, tris, n - 1) == VKRT_ERROR_INVALID_ARGUMENT);
     CHECK(strstr(vkrt_context_last_error(ctx), "out_positions") != NULL);
     free(tris);
+    /* With spatial splits the BVH holds copies of some triangles; the export still gives each
+     * once, in prim_id order, as from the SAH BVH. */
+    vkrt_mesh_desc room = room_mesh();
+    vkrt_scene *split[2] = { NULL, NULL };
+    vkrt_scene_stats sst[2] = { { 0 } };
+    float *room_tris[2] = { NULL, NULL };
+    const size_t room_floats = (ROOM_SMALL + 2) * 9;
+    for (int k = 0; k < 2; k++) {
+        const vkrt_scene_desc sd = { .meshes = &room, .mesh_count = 1,
+                                     .builder = k ? VKRT_BVH_BUILDER_SPATIAL_SAH : VKRT_BVH_BUILDER_BINNED_SAH };
+        CHECK(vkrt_scene_create(ctx, &sd, &split[k]) == VKRT_OK);
+        if (split[k]) vkrt_scene_stats_get(split[k], &sst[k]);
+        room_tris[k] = calloc(room_floats, sizeof *room_tris[k]);
+        if (!room_tris[k]) abort();
+        CHECK(split[k] && vkrt_scene_triangles_get(split[k], room_tris[k], room_floats) == VKRT_OK);
+    }
+    CHECK_MSG(sst[0].triangles == ROOM_SMALL + 2 && sst[1].triangles == ROOM_SMALL + 2 &&
+                  sst[0].bvh_references == sst[0].triangles && sst[1].bvh_references > sst[1].triangles,
+              "triangles %llu and %llu, references %llu and %llu", (unsigned long long)sst[0].triangles,
+              (unsigned long long)sst[1].triangles, (unsigned long long)sst[0].bvh_references,
+              (unsigned long long)sst[1].bvh_references);
+    CHECK(memcmp(room_tris[0], room_tris[1], room_floats * sizeof(float)) == 0);
+    for (int k = 0; k < 2; k++) {
+        free(room_tris[k]);
+        vkrt_scene_destroy(split[k]);
+    }
     vkrt_ray rays[6];
     CHECK(vkrt_camera_rays(ctx, NULL, 3, 2, rays, 6) == VKRT_OK);
     CHECK(rays[0].tmin == 0.0f && rays[0].tmax == 0.0f && rays[0].origin[2] == 1.5f); /* the default eye */

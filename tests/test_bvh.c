@@ -18,9 +18,10 @@
 #include "core.h"
 #include "mesh.h"
 
-static const vkrt_bvh_builder builders[] = { VKRT_BVH_BUILDER_MIDPOINT, VKRT_BVH_BUILDER_BINNED_SAH };
-static const char *const builder_names[] = { "midpoint", "sah" };
-#define BUILDER_COUNT 2
+static const vkrt_bvh_builder builders[] = { VKRT_BVH_BUILDER_MIDPOINT, VKRT_BVH_BUILDER_BINNED_SAH,
+                                              VKRT_BVH_BUILDER_SPATIAL_SAH };
+static const char *const builder_names[] = { "midpoint", "sah", "sbvh" };
+#define BUILDER_COUNT 3
 
 /* ---- synthetic meshes ---------------------------------------------------------------- */
 
@@ -110,8 +111,16 @@ static bool same_box(const vkrt_gpu_node *n, const float *bmin, const float *bma
            n->bmax.y == bmax[1] && n->bmax.z == bmax[2];
 }
 
+static bool box_within(const vkrt_gpu_node *n, const float *bmin, const float *bmax)
+{
+    return n->bmin.x >= bmin[0] && n->bmin.y >= bmin[1] && n->bmin.z >= bmin[2] && n->bmax.x <= bmax[0] &&
+           n->bmax.y <= bmax[1] && n->bmax.z <= bmax[2];
+}
+
 /* Every leaf box is exactly the bounds of its triangles' corners and every interior box
- * exactly the union of its children's, so by induction every box is exact. */
+ * exactly the union of its children's, so by induction every box is exact. With spatial
+ * splits a leaf bounds its triangles' parts: within their corners' bounds (bvh_validate checks
+ * that it covers the parts). */
 static void check_exact_boxes(const char *what, const bvh *b, const mesh *m)
 {
     int reported = 0;
@@ -120,6 +129,12 @@ static void check_exact_boxes(const char *what, const bvh *b, const mesh *m)
         float bmin[3], bmax[3];
         if (n->tri_count) {
             box_of_tris(b, m, n->left_first, n->tri_count, bmin, bmax);
+            if (b->spatial_splits) {
+                bool ok = box_within(n, bmin, bmax);
+                CHECK_MSG(ok, "%s: leaf %u box reaches beyond its triangles' corners", what, i);
+                if (!ok) reported++;
+                continue;
+            }
         } else {
             const vkrt_gpu_node *l = &b->nodes[n->left_first], *r = &b->nodes[n->left_first + 1];
             bmin[0] = fminf(l->bmin.x, r->bmin.x), bmin[1] = fminf(l->bmin.y, r->bmin.y), bmin[2] = fminf(l->bmin.z, r->bmin.z);
@@ -446,10 +461,47 @@ static void bvh_random_10k_is_valid_for_every_builder(void)
         if (build_checked(&c, builder_names[b], &m, builders[b], 0, 0, &out, &s) != VKRT_OK) continue;
         cost[b] = s.sah_cost;
         if (builders[b] == VKRT_BVH_BUILDER_BINNED_SAH) check_leaf_limit("sah random", &out, &m, 4);
+        else if (builders[b] == VKRT_BVH_BUILDER_SPATIAL_SAH) CHECK(s.max_leaf_triangles <= 4);
         else CHECK_EQ_U64(s.max_leaf_triangles, 1);
         bvh_destroy(&c, &out);
     }
     CHECK_MSG(cost[1] <= cost[0], "SAH cost of sah %g > midpoint %g", cost[1], cost[0]);
+    CHECK_MSG(cost[2] <= cost[1], "SAH cost of sbvh %g > sah %g", cost[2], cost[1]);
+    test_mesh_free(&c, &m);
+}
+
+/* Small triangles filling a box, and a few large ones across it (a room's walls around its
+ * furniture): wherever the large triangles go, their boxes cover the whole scene, so every
+ * object split leaves children that overlap, the case spatial splits are for. The SBVH cuts
+ * them: a clearly lower SAH cost, triangles in several leaves, within its reference budget, and
+ * every part of every triangle inside one of its leaves (bvh_validate). */
+static void bvh_sbvh_splits_large_triangles(void)
+{
+    core c;
+    core_init(&c, NULL, NULL, NULL);
+    uint32_t n = 4000, large = 40;
+    mesh m = test_mesh_new(&c, n);
+    for (uint32_t i = 0; i < n; i++) {
+        float x = frand() * 10.0f, y = frand() * 10.0f, z = frand() * 10.0f, s = i < large ? 10.0f : 0.1f;
+        set_tri(&m, i, x, y, z, x + s * (frand() - 0.5f), y + s * (frand() - 0.5f), z + s * (frand() - 0.5f),
+                x + s * (frand() - 0.5f), y + s * (frand() - 0.5f), z + s * (frand() - 0.5f));
+    }
+    update_bounds(&m);
+    bvh sah, sbvh;
+    bvh_stats ss, sp;
+    if (build_checked(&c, "sah large triangles", &m, VKRT_BVH_BUILDER_BINNED_SAH, 0, 0, &sah, &ss) == VKRT_OK) {
+        if (build_checked(&c, "sbvh large triangles", &m, VKRT_BVH_BUILDER_SPATIAL_SAH, 0, 0, &sbvh, &sp) == VKRT_OK) {
+            CHECK_MSG(sbvh.spatial_splits && !sah.spatial_splits, "spatial_splits %d and %d", sbvh.spatial_splits,
+                      sah.spatial_splits);
+            CHECK_MSG(sp.sah_cost < 0.9 * ss.sah_cost, "SAH cost of sbvh %g, of sah %g", sp.sah_cost, ss.sah_cost);
+            CHECK_MSG(sbvh.tri_count > n + large && sbvh.tri_count <= n + n / 2, "%u references for %u triangles",
+                      sbvh.tri_count, n);
+            fprintf(stderr, "  large triangles: sah SAH %.2f, sbvh SAH %.2f with %u references for %u triangles\n",
+                    ss.sah_cost, sp.sah_cost, sbvh.tri_count, n);
+            bvh_destroy(&c, &sbvh);
+        }
+        bvh_destroy(&c, &sah);
+    }
     test_mesh_free(&c, &m);
 }
 
@@ -1043,8 +1095,11 @@ static void bvh_shared_models_are_valid_and_sah_is_cheaper(void)
             bvh_destroy(&c, &out);
         }
         CHECK_MSG(cost[1] <= cost[0], "%s: SAH cost of sah %g > midpoint %g", e->d_name, cost[1], cost[0]);
-        fprintf(stderr, "  %-24s %8u tris  midpoint: SAH %7.2f depth %2u %8.1f ms  sah: SAH %7.2f depth %2u %8.1f ms\n",
-                e->d_name, m.tri_count, cost[0], depth[0], ms[0], cost[1], depth[1], ms[1]);
+        CHECK_MSG(cost[2] <= cost[1], "%s: SAH cost of sbvh %g > sah %g", e->d_name, cost[2], cost[1]);
+        fprintf(stderr,
+                "  %-24s %8u tris  midpoint: SAH %7.2f depth %2u %8.1f ms  sah: SAH %7.2f depth %2u %8.1f ms  "
+                "sbvh: SAH %7.2f depth %2u %8.1f ms\n",
+                e->d_name, m.tri_count, cost[0], depth[0], ms[0], cost[1], depth[1], ms[1], cost[2], depth[2], ms[2]);
         mesh_destroy(&c, &m);
         tested++;
     }
@@ -1059,6 +1114,7 @@ int main(void)
     RUN(bvh_single_triangle_is_one_leaf_root);
     RUN(bvh_two_triangles_are_valid);
     RUN(bvh_random_10k_is_valid_for_every_builder);
+    RUN(bvh_sbvh_splits_large_triangles);
     RUN(bvh_identical_triangles_terminate_in_one_leaf);
     RUN(bvh_degenerate_triangles_are_valid);
     RUN(bvh_flat_grid_is_valid);

@@ -141,9 +141,11 @@ if python3 - "$tmp/bench.csv" "$tmp/out" <<'PY'
 import csv, math, sys
 rows = list(csv.DictReader(open(sys.argv[1])))
 table = [l for l in open(sys.argv[2]) if l.startswith("| ") and not l.startswith("| builder")]
-assert len(rows) == len(table) == 18, (len(rows), len(table))
+assert len(rows) == len(table) == 24, (len(rows), len(table))
 seen = {(r["builder"], r["backend"], r["traversal"], r["intersector"], r["precision"]) for r in rows}
-assert len(seen) == 18, seen
+assert len(seen) == 24, seen
+sah_cost = {float(r["sah_cost"]) for r in rows if r["builder"] == "sah"}
+assert len(sah_cost) == 1 and all(float(r["sah_cost"]) <= min(sah_cost) for r in rows if r["builder"] == "sbvh"), rows
 for r in rows:
     for k in ("build_ms", "sah_cost", "bytes_per_triangle", "trace_ms", "total_ms", "mrays_per_s", "boxes_per_ray",
               "tests_per_ray", "depth_rel_rmse", "depth_rel_max"):
@@ -157,7 +159,7 @@ for r in rows:
     if r["precision"] == "double" and r["intersector"] == "watertight" and r["builder"] == "sah":
         assert int(r["mismatched_pixels"]) == 0 and float(r["depth_rel_max"]) == 0, r  # the reference itself
 PY
-then ok "bench CSV: 18 configurations, finite figures, the reference row exact"; else bad "bench CSV: 18 configurations, finite figures, the reference row exact"; fi
+then ok "bench CSV: 24 configurations, finite figures, the reference row exact"; else bad "bench CSV: 24 configurations, finite figures, the reference row exact"; fi
 expect "bench with a FILE that does not exist fails as input" 3 "$vkrt" bench "$tmp/missing.obj" --quick
 expect "bench --compare with an unknown engine is a usage error" 2 "$vkrt" bench --quick --compare nothing
 # bench --modes: the lighting modes against converged references kept in a cache; a second run
@@ -214,7 +216,7 @@ PY
 then ok "bench --procedural: about N triangles, named by the count, no mismatched pixel, CPU rows only"
 else bad "bench --procedural: about N triangles, named by the count, no mismatched pixel, CPU rows only"; fi
 # The GPU holds one builder's scene at a time: a million triangles take about 145 MB on the
-# device with the SAH BVH and 175 MB with the midpoint one, so 250 MiB hold either but not both
+# device with the SAH BVH and 175 MB with the midpoint one, so 250 MiB hold any one but not two
 # (two at once once overflowed lavapipe's 2 GiB heap at 1e7 triangles, and the bench failed).
 expect "bench --device-memory 250 holds one GPU scene at a time" 0 "$vkrt" bench --quick --procedural 1000000 \
   --backend gpu --device-memory 250 --csv "$tmp/one_scene.csv"
@@ -222,11 +224,11 @@ if python3 - "$tmp/one_scene.csv" <<'PY'
 import csv, sys
 rows = list(csv.DictReader(open(sys.argv[1])))
 gpu = {r["builder"] for r in rows if r["backend"] == "gpu"}
-assert gpu == {"sah", "midpoint"}, gpu
+assert gpu == {"sah", "midpoint", "sbvh"}, gpu
 assert all(r["backend"] == "gpu" for r in rows), [r["backend"] for r in rows]
 PY
-then ok "bench --device-memory 250: both builders' GPU rows, and (--backend gpu) no CPU row"
-else bad "bench --device-memory 250: both builders' GPU rows, and (--backend gpu) no CPU row"; fi
+then ok "bench --device-memory 250: every builder's GPU rows, and (--backend gpu) no CPU row"
+else bad "bench --device-memory 250: every builder's GPU rows, and (--backend gpu) no CPU row"; fi
 # A scene beyond the device's memory skips the GPU rows with a note; the CPU rows still run.
 expect "bench --device-memory 1 skips the GPU" 0 "$vkrt" bench --quick --procedural 20000 --device-memory 1 \
   --csv "$tmp/no_gpu.csv"
@@ -386,6 +388,22 @@ else bad "info memory line"; cat "$tmp/info"; fi
 if grep -qE '^device +[0-9]+ bytes on .* \([0-9.]+ per triangle\), nodes and triangles in 2 storage buffers$' "$tmp/info_gpu"; then
   ok "info --backend gpu measures the device memory and buffers"
 else bad "info --backend gpu"; cat "$tmp/info_gpu" "$tmp/err"; fi
+# --bvh sbvh: the spatial-split builder; info shows its triangle copies, and the GPU renders
+# with it the image the SAH BVH gives
+"$vkrt" info "$models/meshes/homer_10k.obj" --bvh sbvh >"$tmp/info_sbvh" 2>"$tmp/err"
+sah_cost() { sed -nE 's/^sah cost +([0-9.]+) .*/\1/p' "$1"; }
+"$vkrt" info "$models/meshes/homer_10k.obj" >"$tmp/info_sah" 2>"$tmp/err"
+if grep -qE '^builder +sbvh$' "$tmp/info_sbvh" && grep -qE '^triangles +9856$' "$tmp/info_sbvh" \
+   && grep -qE '^references +[0-9]+ \(spatial splits: [0-9.]+% more than the triangles\)$' "$tmp/info_sbvh" \
+   && ! grep -q '^references' "$tmp/info_sah" \
+   && awk -v a="$(sah_cost "$tmp/info_sbvh")" -v b="$(sah_cost "$tmp/info_sah")" 'BEGIN { exit !(a < b) }'; then
+  ok "info --bvh sbvh shows the references and a lower SAH cost than sah"
+else bad "info --bvh sbvh"; cat "$tmp/info_sbvh" "$tmp/info_sah"; fi
+"$vkrt" render "$models/meshes/homer_10k.obj" --bvh sbvh --mode depth -o "$tmp/sbvh.pfm" --size 48x48 2>"$tmp/err"
+"$vkrt" render "$models/meshes/homer_10k.obj" --mode depth -o "$tmp/sah.pfm" --size 48x48 2>>"$tmp/err"
+if [ -s "$tmp/sbvh.pfm" ] && cmp -s "$tmp/sbvh.pfm" "$tmp/sah.pfm"; then ok "render --bvh sbvh gives the SAH BVH's depth image"
+else bad "render --bvh sbvh"; cat "$tmp/err"; fi
+expect "unknown --bvh" 2 "$vkrt" info "$models/meshes/bunny.obj" --bvh sbvh2
 "$vkrt" devices >"$tmp/devices" 2>"$tmp/err"
 if grep -qE '^0: ' "$tmp/devices"; then ok "devices lists a device"; else bad "devices lists a device"; fi
 expect "render on --device 0" 0 "$vkrt" render --device 0 -o "$tmp/d0.png" --size 16x16

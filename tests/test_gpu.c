@@ -87,6 +87,7 @@ static void gpu_matches_cpu_reference(void)
 {
     gpu_matches_cpu_on(VKRT_MODELS_DIR "/meshes/bunny.obj", VKRT_BVH_BUILDER_BINNED_SAH, 96, 96);
     gpu_matches_cpu_on(VKRT_MODELS_DIR "/meshes/bunny.obj", VKRT_BVH_BUILDER_MIDPOINT, 96, 96);
+    gpu_matches_cpu_on(VKRT_MODELS_DIR "/meshes/bunny.obj", VKRT_BVH_BUILDER_SPATIAL_SAH, 96, 96);
     gpu_matches_cpu_on(VKRT_MODELS_DIR "/meshes/dragon_48k.obj", VKRT_BVH_BUILDER_BINNED_SAH, 96, 96);
     gpu_matches_cpu_on(NULL, VKRT_BVH_BUILDER_DEFAULT, 96, 96);
 }
@@ -520,6 +521,65 @@ static void gpu_trace_rays_match_cpu_and_naive(void)
         vkrt_scene_destroy(sg);
         vkrt_scene_destroy(sc);
     }
+}
+
+/* The spatial-split BVH (a triangle in several leaves, each box bounding its part) answers
+ * every ray as the binned SAH BVH does, on either backend, through the wide traversal and the
+ * binary one: bit for bit closest hits (prim_id, t, u, v), the same any-hit answers, the same id
+ * and depth images, and naive traversal over its triangle copies the same hits. homer_10k's
+ * SBVH holds 22% more references than triangles; rays start inside the box as well as outside. */
+static void gpu_spatial_splits_give_the_hits_of_sah(void)
+{
+    const char *path = VKRT_MODELS_DIR "/meshes/homer_10k.obj";
+    vkrt_scene *scenes[2][2] = { { NULL } }; /* [sbvh][cpu] */
+    for (int k = 0; k < 2; k++)
+        for (int b = 0; b < 2; b++)
+            scenes[k][b] = make_scene(b ? cpu : gpu, path, k ? VKRT_BVH_BUILDER_SPATIAL_SAH : VKRT_BVH_BUILDER_BINNED_SAH);
+    vkrt_scene_stats st = { 0 };
+    if (scenes[1][0] && vkrt_scene_stats_get(scenes[1][0], &st) == VKRT_OK)
+        CHECK_MSG(st.bvh_references > st.triangles + st.triangles / 10, "%llu references for %llu triangles",
+                  (unsigned long long)st.bvh_references, (unsigned long long)st.triangles);
+    const size_t n = 20000;
+    vkrt_ray *rays = random_rays_in_box(n, 977);
+    for (int b = 0; b < 2 && scenes[0][0] && scenes[0][1] && scenes[1][0] && scenes[1][1]; b++) {
+        vkrt_context *ctx = b ? cpu : gpu;
+        const char *backend = b ? "cpu" : "gpu";
+        for (int any = 0; any < 2; any++) {
+            vkrt_trace_desc d = { .any_hit = any != 0 };
+            vkrt_hit *sah = trace_all(ctx, scenes[0][b], &d, rays, n), *sbvh = trace_all(ctx, scenes[1][b], &d, rays, n);
+            size_t same = 0, hits = 0;
+            for (size_t i = 0; i < n; i++) {
+                hits += sah[i].prim_id != VKRT_NO_HIT;
+                same += any ? (sah[i].prim_id == VKRT_NO_HIT) == (sbvh[i].prim_id == VKRT_NO_HIT)
+                            : memcmp(&sah[i], &sbvh[i], sizeof sah[i]) == 0;
+            }
+            fprintf(stderr, "  %s %s: sbvh = sah on %zu of %zu rays (%zu hit)\n", backend, any ? "any hit" : "closest",
+                    same, n, hits);
+            CHECK_MSG(same == n, "%s %s: sbvh and sah differ on %zu of %zu rays", backend, any ? "any hit" : "closest",
+                      n - same, n);
+            CHECK_MSG(hits > n / 20, "%s: only %zu of %zu rays hit", backend, hits, n);
+            if (!any && !b) {
+                d.traversal = VKRT_TRAVERSAL_NAIVE;
+                vkrt_hit *naive = trace_all(ctx, scenes[1][b], &d, rays, n);
+                CHECK_MSG(memcmp(naive, sbvh, n * sizeof *naive) == 0, "gpu: sbvh naive and BVH hits differ");
+                free(naive);
+            }
+            free(sah);
+            free(sbvh);
+        }
+        vkrt_render_desc rd = { .width = 64, .height = 64, .mode = VKRT_MODE_ID };
+        for (int mode = 0; mode < 2; mode++) {
+            rd.mode = mode ? VKRT_MODE_DEPTH : VKRT_MODE_ID;
+            float *a = render(ctx, scenes[0][b], &rd), *c = render(ctx, scenes[1][b], &rd);
+            CHECK_MSG(a && c && memcmp(a, c, (size_t)64 * 64 * 4 * sizeof *a) == 0, "%s: sbvh and sah %s images differ",
+                      backend, mode ? "depth" : "id");
+            free(a);
+            free(c);
+        }
+    }
+    free(rays);
+    for (int k = 0; k < 2; k++)
+        for (int b = 0; b < 2; b++) vkrt_scene_destroy(scenes[k][b]);
 }
 
 /* The wide BVH through texel buffers (the default wherever a scene fits one buffer per array)
@@ -1156,6 +1216,7 @@ int main(void)
     RUN(gpu_trace_rays_follow_the_documented_rules);
     RUN(gpu_trace_rays_match_cpu_and_naive);
     RUN(gpu_wide_traversal_matches_the_binary_one);
+    RUN(gpu_spatial_splits_give_the_hits_of_sah);
     RUN(gpu_watertight_never_misses_shared_edges_and_vertices);
     RUN(gpu_eye_inside_a_closed_mesh_always_hits);
     RUN(gpu_grazing_hit_distances_are_exact);

@@ -349,7 +349,7 @@ static void light_table_picks_by_power(void)
     vkrt_gpu_surface surfaces[2] = { { .material = 0 }, { .material = 0 } };
     vkrt_gpu_material materials[1] = { { .emissive = { 1, 1, 1 } } };
     vkrt_light point = { VKRT_LIGHT_POINT, { 0, 2, 0 }, { 1, 1, 1 } };
-    light_table_desc d = { .render_lights = &point, .render_light_count = 1, .tris = tris, .tri_count = 2,
+    light_table_desc d = { .render_lights = &point, .render_light_count = 1, .tris = tris, .tri_count = 2, .prim_count = 2,
                            .surfaces = surfaces, .materials = materials, .scene_radius = 1.0f };
     light_table t;
     core c;
@@ -365,7 +365,22 @@ static void light_table_picks_by_power(void)
     CHECK_NEAR(t.lights[0].pick / t.lights[1].pick, 4.0 / 0.5, 1e-4);
     CHECK(t.lights[2].cdf == 1.0f);
     CHECK_NEAR(t.lighting.emitter_pick, t.lights[1].pick + t.lights[2].pick, 1e-6);
+    const float second_pick = t.lights[2].pick;
     light_table_destroy(&c, &t);
+    /* A spatial split's copy of triangle 1 (the same prim_id at another position) is the same
+     * light: three lights again, and the same picks. */
+    vkrt_gpu_tri copies[3] = { tris[0], tris[1], tris[1] };
+    light_table_desc dd = d;
+    dd.tris = copies;
+    dd.tri_count = 3;
+    light_table u;
+    r = light_table_build(&c, &dd, &u);
+    CHECK(r == VKRT_OK);
+    if (r == VKRT_OK) {
+        CHECK_EQ_U64(u.count, 3);
+        CHECK(u.lights[2].tri == 1 && u.lights[2].pick == second_pick && u.lights[2].cdf == 1.0f);
+        light_table_destroy(&c, &u);
+    }
     /* Nothing lights the scene: the default key light and a sky. */
     light_table_desc dark = { .tris = tris, .tri_count = 0, .surfaces = surfaces, .materials = materials, .scene_radius = 1 };
     r = light_table_build(&c, &dark, &t);

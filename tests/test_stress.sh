@@ -36,6 +36,9 @@ check_table() {
             if (c ~ /^(zero-area|slivers-1e6|fan|identical|flat)/ && !(c " midpoint " back in seen)) {
               print "no midpoint " back " row for " c; bad++
             }
+            if (c ~ /^(zero-area|slivers-1e6|fan|identical|flat)/ && !(c " sbvh " back in seen)) {
+              print "no sbvh " back " row for " c; bad++
+            }
           }
         }
         if (!found) { print "case missing: " want[i]; bad++ }
