@@ -389,6 +389,7 @@ static vkrt_result ensure_surfaces(vkrt_scene *scene, bool needed)
     if (!scene->ctx->vk || !(needed || scene->alpha_tested)) return VKRT_OK;
     const gpu_surface_data data = {
         scene->surfaces,
+        (uint32_t)scene->stats.triangles,
         scene->materials,
         scene->material_count,
         scene->textures,

@@ -262,12 +262,14 @@ vkrt_result gpu_scene_upload_surfaces(vk_context *vk, gpu_scene *s, const gpu_su
     };
     enum { PARTS = sizeof parts / sizeof parts[0] };
     VkBufferUsageFlags usage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT;
-    /* The surfaces, one per triangle, split as the triangles are (and so within the limit). */
+    /* The surfaces, one per triangle of the mesh (prim_id), split as the triangles are (and so
+     * within the limit). */
     gpu_array surfaces = { 0 };
     vkrt_result r = VKRT_OK;
-    if (!s->split_shift) r = check_range(vk, (VkDeviceSize)s->tri_count * sizeof *d->surfaces, "surfaces");
+    if (!s->split_shift) r = check_range(vk, (VkDeviceSize)d->surface_count * sizeof *d->surfaces, "surfaces");
     if (r == VKRT_OK)
-        r = gpu_array_upload(vk, d->surfaces, s->tri_count, sizeof *d->surfaces, s->split_shift, "surfaces", &surfaces);
+        r = gpu_array_upload(vk, d->surfaces, d->surface_count, sizeof *d->surfaces, s->split_shift, "surfaces",
+                             &surfaces);
     for (int i = 0; i < PARTS && r == VKRT_OK; i++) {
         r = check_range(vk, parts[i].bytes, parts[i].name);
         if (r == VKRT_OK) r = vk_buffer_create(vk, parts[i].bytes, usage, VK_MEMORY_DEVICE, parts[i].name, &parts[i].fresh);

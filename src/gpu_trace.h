@@ -58,7 +58,9 @@ uint64_t gpu_scene_traversal_bytes(const gpu_scene *s);
 
 /* What gpu_scene_upload_surfaces uploads (counts of at least 1). */
 typedef struct gpu_surface_data {
-    const vkrt_gpu_surface *surfaces; /* tri_count of them */
+    const vkrt_gpu_surface *surfaces; /* surface_count of them, one per prim_id */
+    uint32_t surface_count;           /* the mesh's triangles: fewer than the scene's tri_count
+                                         where spatial splits copy triangles */
     const vkrt_gpu_material *materials;
     uint32_t material_count;
     const vkrt_gpu_texture *textures;

@@ -524,9 +524,9 @@ static void gpu_trace_rays_match_cpu_and_naive(void)
 }
 
 /* The spatial-split BVH (a triangle in several leaves, each box bounding its part) answers
- * every ray as the binned SAH BVH does, on either backend, through the wide traversal and the
- * binary one: bit for bit closest hits (prim_id, t, u, v), the same any-hit answers, the same id
- * and depth images, and naive traversal over its triangle copies the same hits. homer_10k's
+ * every ray as the binned SAH BVH does, on either backend: bit for bit closest hits (prim_id,
+ * t, u, v), the same any-hit answers, the same id, depth, normal and albedo images, and naive
+ * traversal over its triangle copies the same hits. homer_10k's
  * SBVH holds 22% more references than triangles; rays start inside the box as well as outside. */
 static void gpu_spatial_splits_give_the_hits_of_sah(void)
 {
@@ -567,12 +567,14 @@ static void gpu_spatial_splits_give_the_hits_of_sah(void)
             free(sah);
             free(sbvh);
         }
-        vkrt_render_desc rd = { .width = 64, .height = 64, .mode = VKRT_MODE_ID };
-        for (int mode = 0; mode < 2; mode++) {
-            rd.mode = mode ? VKRT_MODE_DEPTH : VKRT_MODE_ID;
+        /* Albedo reads the surfaces, one per prim_id: fewer than the SBVH's triangle copies. */
+        const vkrt_mode modes[4] = { VKRT_MODE_ID, VKRT_MODE_DEPTH, VKRT_MODE_NORMAL, VKRT_MODE_ALBEDO };
+        const char *const mode_names[4] = { "id", "depth", "normal", "albedo" };
+        for (int mode = 0; mode < 4; mode++) {
+            vkrt_render_desc rd = { .width = 64, .height = 64, .mode = modes[mode] };
             float *a = render(ctx, scenes[0][b], &rd), *c = render(ctx, scenes[1][b], &rd);
             CHECK_MSG(a && c && memcmp(a, c, (size_t)64 * 64 * 4 * sizeof *a) == 0, "%s: sbvh and sah %s images differ",
-                      backend, mode ? "depth" : "id");
+                      backend, mode_names[mode]);
             free(a);
             free(c);
         }
