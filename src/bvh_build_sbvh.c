@@ -48,7 +48,9 @@
  * instead of 1.12-1.15 s, at an SAH cost of 42.866 instead of 42.844. */
 #define SBVH_MIN_BINS 4
 /* Stich et al.'s alpha: spatial splits are tried where the object split's children overlap by
- * more than this fraction of the root's area. */
+ * more than this fraction of the root's area. The paper's 1e-5 gives the full dragon an SAH
+ * cost of 47.37 in 2.5 s; 1e-4 gave 47.52 in 1.8 s, 1e-3 47.74 in 1.1 s (the high-quality
+ * builder keeps the quality). */
 #define SBVH_OVERLAP_ALPHA 1e-5f
 /* References at most 1.5 times the triangles: the scanned meshes of ../shared/models stay well
  * within it (at most 23.5% more, fandisk_13k), and memory stays bounded for any input. */
