@@ -34,10 +34,12 @@
  * to a scratch array copied back above them (spatial), and the right child, now on top, is
  * built first while the left waits on the task stack. A leaf moves its triangle indices to the
  * order and gives its range back. A spatial split that would overrun the budget is not made.
- * Serial: it is the option that trades build time for tree quality. */
+ * A large mesh is built in two phases, the top serially and the subtrees below on threads
+ * (SBVH_TASK_REFS). */
 #include "bvh_build_sah.h"
 
 #include <math.h>
+#include <stdatomic.h>
 #include <string.h>
 
 /* Spatial bins a node's box is cut into on each axis, as the object split's bins. */
@@ -56,6 +58,11 @@
  * within it (at most 23.5% more, fandisk_13k), and memory stays bounded for any input. */
 #define SBVH_REFERENCE_BUDGET_NUM 3
 #define SBVH_REFERENCE_BUDGET_DEN 2
+/* Above this many triangles the build has two phases: the nodes of more references than this,
+ * serially, then the subtrees below, one a thread (desc->threads, work_pool.h), each from its
+ * own copy of its references and with its share of the budget left. The decomposition depends
+ * on the mesh alone, so the BVH is the same, bit for bit, on any number of threads. */
+#define SBVH_TASK_REFS 8192
 /* How far a clipped box is widened off the plane's axis, in ulps of the triangle's coordinates:
  * a crossing point's error is within about 4 (the top of the file). */
 #define SBVH_CLIP_ULPS 8.0f
@@ -407,14 +414,67 @@ static float overlap_fraction(const bvh_build_bounds *l, const bvh_build_bounds 
     return root > 0.0f ? area_of(lo, hi) / root : 0.0f;
 }
 
-static void build(bvh_build_state *b, const mesh *m, sah_ref *refs, sah_ref *scratch, bvh_build_task task,
-                  uint32_t max_leaf, sah_binning *bins, sbvh_bin (*spatial)[SBVH_BINS])
+/* A subtree whose building is left to the parallel phase: its root node (allocated, with its
+ * box) and task, and a copy of its references. */
+typedef struct sbvh_subtree {
+    bvh_build_task task;
+    sah_ref *refs;               /* task.count of them; then, in the parallel phase, `cap` */
+    uint32_t cap;                /* its reference budget */
+    /* Its workspace, allocated on the calling thread (a user's allocator need not be
+     * thread-safe) before the parallel phase. */
+    sah_ref *scratch;
+    sah_binning *bins;
+    sbvh_bin (*spatial)[SBVH_BINS];
+    /* What building it made: nodes (0 is the root), the triangle order, the deepest leaf. */
+    vkrt_gpu_node *nodes;
+    uint32_t node_count;
+    uint32_t *order;
+    uint32_t placed;
+    uint32_t depth;
+} sbvh_subtree;
+
+/* What one build() call works with. Scratch, bins and spatial bins are its own: a thread each. */
+typedef struct sbvh_work {
+    const mesh *m;
+    sah_ref *refs;
+    sah_ref *scratch;            /* as many references as the largest node holds */
+    sah_binning *bins;
+    sbvh_bin (*spatial)[SBVH_BINS];
+    uint32_t max_leaf;
+    float root_area;             /* of the whole tree's root, which alpha is relative to */
+    float reported;              /* the last progress fraction reported */
+    /* The serial phase of a large build: nodes of at most defer_at references (> 0) become
+     * subtrees of the parallel phase instead. */
+    uint32_t defer_at;
+    uint64_t deferred;           /* the references of the subtrees so far */
+    sbvh_subtree *subtrees;
+    size_t subtree_count, subtree_cap;
+    bool out_of_memory;
+} sbvh_work;
+
+/* Moves task's references to a new subtree of w. False when out of memory (w says so). */
+static bool defer_subtree(core *c, sbvh_work *w, const bvh_build_task *task)
 {
-    const vkrt_gpu_node *root = &b->nodes[0];
-    const float root_min[3] = { root->bmin.x, root->bmin.y, root->bmin.z };
-    const float root_max[3] = { root->bmax.x, root->bmax.y, root->bmax.z };
-    const float root_area = area_of(root_min, root_max);
-    float reported = 0.0f;
+    sah_ref *copy = core_alloc_array(c, task->count, sizeof *copy);
+    if (!copy || core_grow(c, (void **)&w->subtrees, &w->subtree_cap, w->subtree_count + 1, sizeof *w->subtrees)) {
+        core_free(c, copy);
+        w->out_of_memory = true;
+        return false;
+    }
+    memcpy(copy, w->refs + task->first, (size_t)task->count * sizeof *copy);
+    w->subtrees[w->subtree_count++] = (sbvh_subtree){ .task = *task, .refs = copy };
+    w->deferred += task->count;
+    return true;
+}
+
+static void build(bvh_build_state *b, sbvh_work *w, bvh_build_task task)
+{
+    const mesh *m = w->m;
+    sah_ref *refs = w->refs, *scratch = w->scratch;
+    sah_binning *bins = w->bins;
+    sbvh_bin (*spatial)[SBVH_BINS] = w->spatial;
+    const uint32_t max_leaf = w->max_leaf;
+    const float root_area = w->root_area;
     for (;;) {
         const vkrt_gpu_node *node = &b->nodes[task.node];
         const float nmin[3] = { node->bmin.x, node->bmin.y, node->bmin.z };
@@ -422,6 +482,12 @@ static void build(bvh_build_state *b, const mesh *m, sah_ref *refs, sah_ref *scr
         bool leaf = task.count == 1 || task.depth >= VKRT_MAX_BVH_DEPTH;
         uint32_t left_count = 0, right_count = 0;
         bvh_build_bounds left, right;
+        if (!leaf && task.count <= w->defer_at) {
+            /* Built in the parallel phase; its references' room is free again, as a leaf's. */
+            if (!defer_subtree(b->c, w, &task) || b->sp == 0) return;
+            task = b->stack[--b->sp];
+            continue;
+        }
         if (!leaf) {
             /* The best object split, as the binned SAH builder finds it. */
             sah_grid g;
@@ -439,11 +505,11 @@ static void build(bvh_build_state *b, const mesh *m, sah_ref *refs, sah_ref *scr
                 grid_of(node, task.count, &sg);
                 spatial_bin(m, refs + task.first, refs + task.first + task.count, &sg, spatial);
                 sp = spatial_sweep(spatial, &sg);
-                /* Within the budget (the references placed in leaves, those below this node and
-                 * the node's two sides), and not every reference on both sides (which would only
+                /* Within the budget (the references placed in leaves or left to subtrees, those
+                 * below this node and the node's two sides), and not every reference on both sides (which would only
                  * copy the node into two smaller boxes, as often as the budget allows). */
                 bool fits = sp.axis >= 0 &&
-                            b->placed + task.first + sp.left_n + sp.right_n <= (uint64_t)b->ref_cap &&
+                            b->placed + w->deferred + task.first + sp.left_n + sp.right_n <= (uint64_t)b->ref_cap &&
                             (sp.left_n < task.count || sp.right_n < task.count);
                 if (!fits || !(sp.cost < s.cost)) sp.axis = -1;
             }
@@ -486,7 +552,7 @@ static void build(bvh_build_state *b, const mesh *m, sah_ref *refs, sah_ref *scr
             memcpy(&b->order[b->placed + k], &refs[task.first + k].bmax[3], sizeof b->order[0]);
         if (task.depth > b->depth) b->depth = task.depth;
         b->placed += task.count;
-        if (!report_progress(b, task.first, &reported) || b->sp == 0) return;
+        if (!report_progress(b, task.first, &w->reported) || b->sp == 0) return;
         task = b->stack[--b->sp];
     }
 }
@@ -508,6 +574,173 @@ static void refit(vkrt_gpu_node *nodes, uint32_t count)
     }
 }
 
+/* The parallel phase: every subtree built by one thread (items of a work_pool job), then
+ * merged into the serial phase's tree in the order the subtrees were made. */
+typedef struct sbvh_job {
+    core *c;
+    const mesh *m;
+    const vkrt_gpu_node *main_nodes; /* the serial phase's: each subtree's root box */
+    sbvh_subtree *subtrees;
+    uint32_t max_leaf;
+    float root_area;
+    uint64_t capacity;           /* the whole build's reference budget */
+    uint64_t refs;               /* the references after the serial phase: placed and deferred */
+    bvh_build_state *b;          /* the serial phase's state, for progress (calling thread) */
+    uint64_t placed;             /* the serial phase's leaves' references */
+    _Atomic uint64_t done;       /* the references of the subtrees built so far */
+    float reported;
+} sbvh_job;
+
+static void subtree_free_workspace(core *c, sbvh_subtree *t)
+{
+    core_free(c, t->refs);
+    core_free(c, t->scratch);
+    core_free(c, t->bins);
+    core_free(c, t->spatial);
+    t->refs = t->scratch = NULL;
+    t->bins = NULL;
+    t->spatial = NULL;
+}
+
+static void subtree_free(core *c, sbvh_subtree *t)
+{
+    subtree_free_workspace(c, t);
+    core_free(c, t->nodes);
+    core_free(c, t->order);
+    t->nodes = NULL;
+    t->order = NULL;
+}
+
+/* Gives subtree t its budget (its references and its share of what the serial phase left of
+ * the build's) and its workspace. False when out of memory. */
+static bool subtree_prepare(core *c, const sbvh_job *j, sbvh_subtree *t)
+{
+    const uint32_t count = t->task.count;
+    const uint64_t spare = j->capacity > j->refs ? j->capacity - j->refs : 0;
+    t->cap = (uint32_t)(count + spare * count / j->refs);
+    sah_ref *refs = core_alloc_array(c, t->cap, sizeof *refs);
+    if (!refs) return false;
+    memcpy(refs, t->refs, (size_t)count * sizeof *refs);
+    core_free(c, t->refs);
+    t->refs = refs;
+    t->scratch = core_alloc_array(c, count, sizeof *t->scratch);
+    t->bins = core_alloc_array(c, 1, sizeof *t->bins);
+    t->spatial = core_alloc_array(c, 3, sizeof *t->spatial);
+    t->nodes = core_alloc_array(c, 2 * (size_t)t->cap - 1, sizeof *t->nodes);
+    t->order = core_alloc_array(c, t->cap, sizeof *t->order);
+    return t->scratch && t->bins && t->spatial && t->nodes && t->order;
+}
+
+static void build_subtree_item(void *job, uint32_t item)
+{
+    sbvh_job *j = job;
+    sbvh_subtree *t = &j->subtrees[item];
+    bvh_build_state sb;
+    memset(&sb, 0, offsetof(bvh_build_state, stack));
+    sb.c = j->c;
+    sb.tri_count = t->task.count;
+    sb.ref_cap = t->cap;
+    sb.node_cap = 2 * t->cap - 1;
+    sb.refs = t->refs;
+    sb.nodes = t->nodes;
+    sb.order = t->order;
+    sb.nodes[0] = j->main_nodes[t->task.node];
+    sb.node_count = 1;
+    bvh_build_task task = t->task;
+    task.node = 0;
+    task.first = 0;
+    bvh_build_sah_binning_empty(t->bins);
+    sbvh_work w = { .m = j->m, .refs = t->refs, .scratch = t->scratch, .bins = t->bins, .spatial = t->spatial,
+                    .max_leaf = j->max_leaf, .root_area = j->root_area };
+    build(&sb, &w, task);
+    t->node_count = sb.node_count;
+    t->placed = (uint32_t)sb.placed;
+    t->depth = sb.depth;
+    atomic_fetch_add(&j->done, t->task.count);
+}
+
+/* Progress on the calling thread between subtrees; false cancels the rest. */
+static bool subtree_progress(void *job)
+{
+    sbvh_job *j = job;
+    bvh_build_state *b = j->b;
+    if (!b->progress) return true;
+    float fraction = (float)((double)(j->placed + atomic_load(&j->done)) / (double)j->refs);
+    if (fraction > j->reported) j->reported = fraction;
+    if (b->progress(b->progress_user, "bvh", j->reported)) return true;
+    b->cancelled = true;
+    return false;
+}
+
+/* Appends every subtree to b's nodes and order: a subtree's root replaces its placeholder
+ * node, its other nodes follow the tree's (children stay pairs after their parent), its
+ * leaves' ranges move by where its order lands. */
+static vkrt_result merge_subtrees(bvh_build_state *b, sbvh_subtree *subtrees, size_t count)
+{
+    uint64_t nodes = b->node_count, refs = b->placed;
+    for (size_t i = 0; i < count; i++) {
+        nodes += subtrees[i].node_count - 1;
+        refs += subtrees[i].placed;
+    }
+    if (nodes > UINT32_MAX || refs > UINT32_MAX / 2)
+        return core_fail(b->c, VKRT_ERROR_LIMIT, "the spatial-split BVH needs more than %u nodes", UINT32_MAX);
+    vkrt_gpu_node *all_nodes = core_alloc_array(b->c, (size_t)nodes, sizeof *all_nodes);
+    uint32_t *all_order = core_alloc_array(b->c, (size_t)refs, sizeof *all_order);
+    if (!all_nodes || !all_order) {
+        core_free(b->c, all_nodes);
+        core_free(b->c, all_order);
+        return core_fail(b->c, VKRT_ERROR_OUT_OF_MEMORY, "out of memory merging the spatial-split BVH of %u triangles",
+                         b->tri_count);
+    }
+    memcpy(all_nodes, b->nodes, (size_t)b->node_count * sizeof *all_nodes);
+    memcpy(all_order, b->order, (size_t)b->placed * sizeof *all_order);
+    uint32_t next_node = b->node_count, next_ref = (uint32_t)b->placed;
+    for (size_t i = 0; i < count; i++) {
+        const sbvh_subtree *t = &subtrees[i];
+        /* Local node k > 0 lands at next_node + k - 1, the root at its placeholder. */
+        for (uint32_t k = 0; k < t->node_count; k++) {
+            vkrt_gpu_node n = t->nodes[k];
+            n.left_first = n.tri_count ? n.left_first + next_ref : next_node + n.left_first - 1;
+            all_nodes[k ? next_node + k - 1 : t->task.node] = n;
+        }
+        memcpy(all_order + next_ref, t->order, (size_t)t->placed * sizeof *all_order);
+        next_node += t->node_count - 1;
+        next_ref += t->placed;
+        if (t->depth > b->depth) b->depth = t->depth;
+    }
+    core_free(b->c, b->nodes);
+    core_free(b->c, b->order);
+    b->nodes = all_nodes;
+    b->node_count = b->node_cap = (uint32_t)nodes;
+    b->order = all_order;
+    b->placed = refs;
+    b->ref_cap = (uint32_t)refs;
+    return VKRT_OK;
+}
+
+/* The parallel phase on `threads` threads. On failure nothing of the subtrees is left. */
+static vkrt_result build_subtrees(bvh_build_state *b, sbvh_work *w, uint32_t threads)
+{
+    sbvh_job j = { .c = b->c, .m = w->m, .main_nodes = b->nodes, .subtrees = w->subtrees, .max_leaf = w->max_leaf,
+                   .root_area = w->root_area, .capacity = b->ref_cap, .refs = b->placed + w->deferred, .b = b,
+                   .placed = b->placed, .reported = w->reported };
+    atomic_init(&j.done, 0);
+    vkrt_result r = VKRT_OK;
+    for (size_t i = 0; i < w->subtree_count && r == VKRT_OK; i++)
+        if (!subtree_prepare(b->c, &j, &w->subtrees[i]))
+            r = core_fail(b->c, VKRT_ERROR_OUT_OF_MEMORY, "out of memory building the spatial-split BVH of %u triangles",
+                          b->tri_count);
+    work_pool *pool = NULL;
+    if (r == VKRT_OK) r = work_pool_create(b->c, threads, &pool);
+    if (r == VKRT_OK) {
+        work_pool_run(pool, (uint32_t)w->subtree_count, build_subtree_item, subtree_progress, &j);
+        work_pool_destroy(pool);
+        if (!b->cancelled) r = merge_subtrees(b, w->subtrees, w->subtree_count);
+    }
+    for (size_t i = 0; i < w->subtree_count; i++) subtree_free(b->c, &w->subtrees[i]);
+    return r;
+}
+
 vkrt_result bvh_build_sbvh(core *c, const mesh *m, const bvh_build_desc *desc, bvh *out)
 {
     uint64_t budget = (uint64_t)m->tri_count * SBVH_REFERENCE_BUDGET_NUM / SBVH_REFERENCE_BUDGET_DEN;
@@ -515,29 +748,38 @@ vkrt_result bvh_build_sbvh(core *c, const mesh *m, const bvh_build_desc *desc, b
     bvh_build_state b;
     vkrt_result r = bvh_build_begin_capacity(&b, c, m, desc, sizeof(sah_ref), SAH_REF_TRI_OFFSET, capacity, out);
     if (r != VKRT_OK) return r;
-    sah_ref *scratch = core_alloc_array(c, b.tri_count, sizeof *scratch);
-    sah_binning *bins = core_alloc_array(c, 1, sizeof *bins);
-    sbvh_bin (*spatial)[SBVH_BINS] = core_alloc_array(c, 3, sizeof *spatial);
-    if (!scratch || !bins || !spatial) {
-        core_free(c, scratch);
-        core_free(c, bins);
-        core_free(c, spatial);
+    sbvh_work w = { .m = m, .refs = b.refs, .max_leaf = desc && desc->max_leaf_size ? desc->max_leaf_size
+                                                                                     : SAH_DEFAULT_MAX_LEAF,
+                    .defer_at = b.tri_count > SBVH_TASK_REFS ? SBVH_TASK_REFS : 0 };
+    w.scratch = core_alloc_array(c, b.tri_count, sizeof *w.scratch);
+    w.bins = core_alloc_array(c, 1, sizeof *w.bins);
+    w.spatial = core_alloc_array(c, 3, sizeof *w.spatial);
+    if (w.scratch && w.bins && w.spatial) {
+        bvh_build_bounds root;
+        bvh_build_sah_refs(m, b.refs, 0, b.tri_count, &root);
+        w.root_area = area_of(root.bmin, root.bmax);
+        bvh_build_sah_binning_empty(w.bins);
+        bvh_build_task task;
+        if (bvh_build_start(&b, &root, &task)) build(&b, &w, task);
+    } else {
+        w.out_of_memory = true;
+    }
+    core_free(c, w.scratch);
+    core_free(c, w.bins);
+    core_free(c, w.spatial);
+    if (w.out_of_memory)
+        r = core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "out of memory building the spatial-split BVH of %u triangles",
+                      m->tri_count);
+    if (r == VKRT_OK && !b.cancelled && w.subtree_count)
+        r = build_subtrees(&b, &w, desc && desc->threads ? desc->threads : 1);
+    for (size_t i = 0; i < w.subtree_count; i++) subtree_free(c, &w.subtrees[i]);
+    core_free(c, w.subtrees);
+    if (r != VKRT_OK) {
         bvh_build_abort(&b);
-        return core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "out of memory building the spatial-split BVH of %u triangles",
-                         m->tri_count);
+        memset(out, 0, sizeof *out);
+        return r;
     }
-    uint32_t max_leaf = desc && desc->max_leaf_size ? desc->max_leaf_size : SAH_DEFAULT_MAX_LEAF;
-    bvh_build_bounds root;
-    bvh_build_sah_refs(m, b.refs, 0, b.tri_count, &root);
-    bvh_build_sah_binning_empty(bins);
-    bvh_build_task task;
-    if (bvh_build_start(&b, &root, &task)) {
-        build(&b, m, b.refs, scratch, task, max_leaf, bins, spatial);
-        if (!b.cancelled && b.progress && !b.progress(b.progress_user, "bvh", 1.0f)) b.cancelled = true;
-    }
-    core_free(c, scratch);
-    core_free(c, bins);
-    core_free(c, spatial);
+    if (!b.cancelled && b.progress && !b.progress(b.progress_user, "bvh", 1.0f)) b.cancelled = true;
     if (!b.cancelled) refit(b.nodes, b.node_count);
     b.order_filled = true;
     b.tri_count = (uint32_t)b.placed;

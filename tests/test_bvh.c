@@ -931,23 +931,65 @@ static void bvh_sah_builds_the_same_tree_when_threads_fail_to_start(void)
     test_mesh_free(&c, &m);
 }
 
-static void bvh_sah_parallel_out_of_memory_and_cancel_without_leak(void)
+/* A builder's parallel path on 1 and 3 threads over `tris` random triangles: out of memory at
+ * every allocation (at least min_failures of them) and a cancel at every progress call, each
+ * leaking nothing. */
+static void check_parallel_failures(const char *name, vkrt_bvh_builder builder, uint32_t tris, int min_failures)
 {
     counting k = { 0 };
     core c;
     core_init(&c, &(vkrt_allocator){ counting_alloc, counting_free, &k }, NULL, NULL);
-    mesh m = make_random(&c, PARALLEL_TEST_TRIS);
+    mesh m = make_random(&c, tris);
     const uint32_t threads[] = { 1, 3 };
     for (size_t t = 0; t < sizeof threads / sizeof threads[0]; t++) {
         char what[64];
-        snprintf(what, sizeof what, "sah parallel on %u threads", threads[t]);
-        bvh_build_desc desc = { .builder = VKRT_BVH_BUILDER_BINNED_SAH, .threads = threads[t] };
+        snprintf(what, sizeof what, "%s parallel on %u threads", name, threads[t]);
+        bvh_build_desc desc = { .builder = builder, .threads = threads[t] };
         int failures = check_out_of_memory_at_every_allocation(what, &c, &k, &m, &desc);
-        CHECK_MSG(failures >= 8, "%s: only %d allocations could fail", what, failures);
+        CHECK_MSG(failures >= min_failures, "%s: only %d allocations could fail", what, failures);
         check_cancel_at_every_call(what, &c, &k, &m, desc);
     }
     test_mesh_free(&c, &m);
     CHECK_EQ_U64(k.allocs, k.frees);
+}
+
+static void bvh_sah_parallel_out_of_memory_and_cancel_without_leak(void)
+{
+    check_parallel_failures("sah", VKRT_BVH_BUILDER_BINNED_SAH, PARALLEL_TEST_TRIS, 8);
+}
+
+/* The spatial-split builder above 8,192 triangles: the nodes above subtrees of at most that many
+ * references serially, the subtrees on the threads. The same nodes and order on 1, 2, 3 and 8
+ * threads (dragon_48k); out of memory at every allocation and a cancel at every progress call
+ * on 1 and 3 threads leak nothing (20,000 random triangles, three subtrees and more). */
+static void bvh_sbvh_parallel_is_identical_and_fails_cleanly(void)
+{
+    core c;
+    core_init(&c, NULL, NULL, NULL);
+    const char *path = VKRT_MODELS_DIR "/meshes/dragon_48k.obj";
+    mesh dragon = { 0 };
+    vkrt_result r = mesh_load(&c, path, &dragon);
+    CHECK_MSG(r == VKRT_OK, "%s: %s (%s)", path, vkrt_result_string(r), c.last_error);
+    bvh one;
+    bvh_stats s;
+    if (r == VKRT_OK && build_checked(&c, "sbvh dragon_48k, 1 thread", &dragon, VKRT_BVH_BUILDER_SPATIAL_SAH, 0, 1, &one,
+                                      &s) == VKRT_OK) {
+        static const uint32_t threads[] = { 2, 3, 8 };
+        for (size_t t = 0; t < sizeof threads / sizeof threads[0]; t++) {
+            char what[64];
+            snprintf(what, sizeof what, "sbvh dragon_48k, %u threads", threads[t]);
+            bvh many;
+            bvh_stats ms;
+            if (build_checked(&c, what, &dragon, VKRT_BVH_BUILDER_SPATIAL_SAH, 0, threads[t], &many, &ms) != VKRT_OK)
+                continue;
+            check_same_bvh(what, &one, &many);
+            bvh_destroy(&c, &many);
+        }
+        CHECK_MSG(one.tri_count > dragon.tri_count, "%u references for %u triangles", one.tri_count, dragon.tri_count);
+        bvh_destroy(&c, &one);
+    }
+    if (r == VKRT_OK) mesh_destroy(&c, &dragon);
+    check_parallel_failures("sbvh", VKRT_BVH_BUILDER_SPATIAL_SAH, 20000, 20);
 }
 
 /* The parallel build's top levels place no triangle in a leaf, and used to call the progress
@@ -1128,6 +1170,7 @@ int main(void)
     RUN(bvh_sah_is_identical_on_any_thread_count);
     RUN(bvh_sah_parallel_out_of_memory_and_cancel_without_leak);
     RUN(bvh_sah_parallel_top_levels_report_progress);
+    RUN(bvh_sbvh_parallel_is_identical_and_fails_cleanly);
     RUN(bvh_sah_builds_the_same_tree_when_threads_fail_to_start);
     RUN(bvh4_collapse_fails_cleanly);
     RUN(bvh_validate_reports_broken_trees);
