@@ -400,6 +400,14 @@ static vkrt_result ensure_surfaces(vkrt_scene *scene, bool needed)
     return gpu_scene_upload_surfaces(scene->ctx->vk, &scene->gpu, &data);
 }
 
+/* On the GPU, the binary BVH's nodes and the shading triangles go to the device the first time
+ * a call reads them (GPU_ARRAY_*): a scene traced through the wide BVH alone never holds them. */
+static vkrt_result ensure_arrays(vkrt_scene *scene, uint32_t arrays)
+{
+    if (!scene->ctx->vk || !arrays) return VKRT_OK;
+    return gpu_scene_upload_arrays(scene->ctx->vk, &scene->gpu, &scene->bvh, scene->tris, arrays);
+}
+
 /* The intersector and precision fields shared by vkrt_render_desc and vkrt_trace_desc. */
 static vkrt_result check_tracing(vkrt_context *ctx, vkrt_intersector intersector, vkrt_precision precision,
                                  const char *desc_name)
@@ -489,6 +497,8 @@ static vkrt_result render_lighting(vkrt_context *ctx, vkrt_scene *scene, const v
     if (!(d->target_error >= 0.0f) || !isfinite(d->target_error))
         return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "vkrt_render_desc.target_error must be finite and >= 0 (%g)", d->target_error);
     vkrt_result r = ensure_surfaces(scene, true);
+    if (r == VKRT_OK && ctx->vk)
+        r = ensure_arrays(scene, GPU_ARRAY_TRIS | gpu_trace_rays_arrays(&scene->gpu, traversal));
     if (r != VKRT_OK) return r;
     light_table table;
     const light_table_desc ld = {
@@ -604,7 +614,8 @@ vkrt_result vkrt_render(vkrt_context *ctx, vkrt_scene *scene, const vkrt_render_
             .textured = scene->texture_count > 0, .progress = d.progress,
             .progress_user = d.progress_user,
         };
-        r = gpu_trace_render(ctx->vk, &scene->gpu, &p, out_rgba, &trace_ms, &counts);
+        r = ensure_arrays(scene, gpu_trace_render_arrays(&scene->gpu, &p));
+        if (r == VKRT_OK) r = gpu_trace_render(ctx->vk, &scene->gpu, &p, out_rgba, &trace_ms, &counts);
     } else {
         cpu_trace_scene s = cpu_scene_of(scene);
         cpu_trace_params p = {
@@ -687,7 +698,9 @@ vkrt_result vkrt_trace_rays(vkrt_context *ctx, vkrt_scene *scene, const vkrt_tra
             .textured = scene->texture_count > 0, .any_hit = d.any_hit,
             .progress = d.progress, .progress_user = d.progress_user,
         };
-        if ((r = ensure_surfaces(scene, false)) == VKRT_OK) r = gpu_trace_rays(ctx->vk, &scene->gpu, &p, rays, count, out_hits);
+        if ((r = ensure_surfaces(scene, false)) == VKRT_OK)
+            r = ensure_arrays(scene, gpu_trace_rays_arrays(&scene->gpu, traversal));
+        if (r == VKRT_OK) r = gpu_trace_rays(ctx->vk, &scene->gpu, &p, rays, count, out_hits);
     } else {
         cpu_trace_scene s = cpu_scene_of(scene);
         cpu_trace_rays_params p = {

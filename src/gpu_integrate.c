@@ -1,5 +1,6 @@
 #include "gpu_integrate.h"
 
+#include <assert.h>
 #include <math.h>
 #include <string.h>
 
@@ -315,6 +316,8 @@ static void read_tile(const wave *w, vkrt_gpu_push push, float *out_rgba, trace_
 vkrt_result gpu_integrate_render(vk_context *vk, const gpu_scene *scene, const gpu_integrate_params *params,
                                  float *out_rgba, double *out_device_ms, trace_counts *out_counts)
 {
+    /* shade.comp reads the hit triangles' corners and normals, and the lights'. */
+    assert(scene->tris_uploaded && scene->surfaces_uploaded);
     *out_device_ms = 0.0;
     *out_counts = (trace_counts){ 0 };
     const uint32_t width = params->camera.width, height = params->camera.height;

@@ -26,8 +26,8 @@ typedef struct gpu_integrate_params {
 } gpu_integrate_params;
 
 /* Writes width * height * 4 floats (mean radiance and coverage) to out_rgba, the device time
- * of every dispatch to *out_device_ms, and the samples and rays to *out_counts. The surfaces
- * must be uploaded. */
+ * of every dispatch to *out_device_ms, and the samples and rays to *out_counts. The surfaces,
+ * the triangles and what the traversal reads (gpu_trace_rays_arrays) must be uploaded. */
 vkrt_result gpu_integrate_render(vk_context *vk, const gpu_scene *scene, const gpu_integrate_params *params,
                                  float *out_rgba, double *out_device_ms, trace_counts *out_counts);
 

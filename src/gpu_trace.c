@@ -42,6 +42,12 @@ static VkDeviceSize piece_limit(const vk_context *vk)
     return limit < 2 * sizeof(vkrt_gpu_tri) ? 2 * sizeof(vkrt_gpu_tri) : limit;
 }
 
+/* The pieces an array of `count` elements is split into (1 where the scene is not split). */
+static uint64_t piece_count(uint64_t count, uint32_t shift)
+{
+    return shift ? (count + ((uint64_t)1 << shift) - 1) >> shift : 1;
+}
+
 static void gpu_array_destroy(vk_context *vk, gpu_array *a)
 {
     for (uint32_t i = 0; i < a->count; i++) vk_buffer_destroy(vk, &a->pieces[i]);
@@ -56,7 +62,7 @@ static vkrt_result gpu_array_upload(vk_context *vk, const void *data, uint64_t c
                                     const char *label, gpu_array *out)
 {
     const uint64_t per_piece = shift ? (uint64_t)1 << shift : (count ? count : 1);
-    const uint64_t pieces = count ? (count + per_piece - 1) / per_piece : 1;
+    const uint64_t pieces = count ? piece_count(count, shift) : 1;
     out->pieces = core_calloc_array(vk->core, (size_t)pieces, sizeof *out->pieces);
     if (!out->pieces)
         return core_fail(vk->core, VKRT_ERROR_OUT_OF_MEMORY, "out of memory for the %llu buffers of the scene's %s",
@@ -77,8 +83,8 @@ static vkrt_result gpu_array_upload(vk_context *vk, const void *data, uint64_t c
     return r;
 }
 
-/* Fills the piece table of a split scene with the address of every piece (the surfaces'
- * entries stay zero until they are uploaded: no pipeline reads them before). */
+/* Fills the piece table of a split scene with the address of every piece (the entries of an
+ * array still a placeholder stay zero: no pipeline reads it before it is uploaded). */
 static vkrt_result write_piece_table(vk_context *vk, gpu_scene *s)
 {
     if (!s->split_shift) return VKRT_OK;
@@ -87,8 +93,11 @@ static vkrt_result write_piece_table(vk_context *vk, gpu_scene *s)
     if (!table) return core_fail(vk->core, VKRT_ERROR_OUT_OF_MEMORY, "out of memory for the scene's piece table");
     const gpu_array *arrays[VKRT_PIECE_ARRAYS] = {
         [VKRT_PIECE_TRIS] = &s->tris, [VKRT_PIECE_NODES] = &s->nodes, [VKRT_PIECE_SURFACES] = &s->surfaces };
+    const bool uploaded[VKRT_PIECE_ARRAYS] = {
+        [VKRT_PIECE_TRIS] = s->tris_uploaded, [VKRT_PIECE_NODES] = s->nodes_uploaded,
+        [VKRT_PIECE_SURFACES] = s->surfaces_uploaded };
     for (uint32_t a = 0; a < VKRT_PIECE_ARRAYS; a++) {
-        if (a == VKRT_PIECE_SURFACES && !s->surfaces_uploaded) continue;
+        if (!uploaded[a]) continue;
         for (uint32_t k = 0; k < arrays[a]->count; k++) {
             VkDeviceAddress address = vk_buffer_address(vk, &arrays[a]->pieces[k]);
             table[(size_t)VKRT_PIECE_ARRAYS * k + a] = (vkrt_gpu_address){ (uint32_t)address, (uint32_t)(address >> 32) };
@@ -119,12 +128,13 @@ static vkrt_result create_wide_buffers(vk_context *vk, const wide_arrays *w, boo
  * triangles exceed one storage buffer) has them too: a texel buffer's limit is in texels (2^27
  * on lavapipe, 2.5 a triangle), not the storage buffer range, and the binary BVH it was traced
  * through before was 2x slower on primary rays of the 1e7-triangle procedural scene, 5x on
- * AO rays. The wide arrays only speed the traversal up: a scene whose device memory has no room
- * for them keeps to the binary BVH (as one beyond their limits does), with a warning, rather
- * than failing; on lavapipe's 2 GiB heap that is a scene of about 14 million triangles (151
- * bytes each with them, 96 without). */
-static vkrt_result upload_wide(vk_context *vk, const bvh *b, const vkrt_gpu_tri *tris, gpu_scene *out)
+ * AO rays. A scene whose wide arrays the device cannot allocate (each is one buffer, where the
+ * binary arrays are in pieces) keeps to the binary BVH, with a warning, rather than failing,
+ * as one beyond their limits does. */
+static vkrt_result upload_wide(vk_context *vk, const bvh *b, const vkrt_gpu_tri *tris, gpu_scene *out,
+                               uint64_t *out_unfit_bytes)
 {
+    *out_unfit_bytes = 0;
     wide_arrays w = { 0 };
     vkrt_result r = VKRT_OK;
     const double t0 = core_now_ms();
@@ -140,11 +150,7 @@ static vkrt_result upload_wide(vk_context *vk, const bvh *b, const vkrt_gpu_tri 
     r = create_wide_buffers(vk, &w, usable, out);
     bool wide = usable;
     if (r == VKRT_ERROR_OUT_OF_DEVICE_MEMORY && usable) {
-        core_log(vk->core, VKRT_LOG_WARN,
-                 "the 4-wide BVH of %u triangles (%llu bytes) does not fit the device memory left; the scene is "
-                 "traced through its binary BVH",
-                 w.tri_count,
-                 (unsigned long long)(((uint64_t)w.node_count * VKRT_WIDE_NODE_TEXELS + w.tri_texel_count) * 16u));
+        *out_unfit_bytes = ((uint64_t)w.node_count * VKRT_WIDE_NODE_TEXELS + w.tri_texel_count) * 16u;
         wide = false;
         r = create_wide_buffers(vk, &w, false, out);
     }
@@ -156,17 +162,14 @@ static vkrt_result upload_wide(vk_context *vk, const bvh *b, const vkrt_gpu_tri 
 vkrt_result gpu_scene_upload(vk_context *vk, const bvh *b, const vkrt_gpu_tri *tris, gpu_scene *out)
 {
     memset(out, 0, sizeof *out);
-    const vkrt_gpu_node *nodes = b->nodes;
     const uint32_t node_count = b->node_count, tri_count = b->tri_count;
     const VkDeviceSize limit = piece_limit(vk);
-    const VkDeviceSize node_bytes = (VkDeviceSize)node_count * sizeof *nodes;
-    (void)node_bytes; /* read by the assert alone */
     const VkDeviceSize tri_bytes = (VkDeviceSize)tri_count * sizeof *tris;
     vkrt_result r = VKRT_OK;
     /* The triangles are the largest array (at most 2T - 1 nodes of 32 bytes are fewer bytes than
      * T triangles of 64) and set the one shift of every array: a piece holds as many triangles
      * as fit the limit, rounded down to a power of two. */
-    assert(node_bytes <= tri_bytes);
+    assert((VkDeviceSize)node_count * sizeof *b->nodes <= tri_bytes);
     if (tri_bytes > limit) {
         if (!vk->buffer_address)
             return core_fail(vk->core, VKRT_ERROR_LIMIT,
@@ -177,13 +180,25 @@ vkrt_result gpu_scene_upload(vk_context *vk, const bvh *b, const vkrt_gpu_tri *t
         while (((VkDeviceSize)2 << shift) * sizeof *tris <= limit && shift < 31) shift++;
         out->split_shift = shift;
     }
-    if ((r = gpu_array_upload(vk, nodes, node_count, sizeof *nodes, out->split_shift, "BVH nodes", &out->nodes)) != VKRT_OK)
+    out->node_count = node_count;
+    out->tri_count = tri_count;
+    /* Every binding needs a buffer; these stand in until a call reads the array. */
+    const vkrt_gpu_node no_node = { 0 };
+    const vkrt_gpu_tri no_tri = { 0 };
+    const vkrt_gpu_surface no_surface = { 0 };
+    if ((r = gpu_array_upload(vk, &no_node, 1, sizeof no_node, 0, "BVH nodes (placeholder)", &out->nodes)) != VKRT_OK)
         goto fail;
-    if ((r = gpu_array_upload(vk, tris, tri_count, sizeof *tris, out->split_shift, "triangles", &out->tris)) != VKRT_OK)
+    if ((r = gpu_array_upload(vk, &no_tri, 1, sizeof no_tri, 0, "triangles (placeholder)", &out->tris)) != VKRT_OK)
+        goto fail;
+    if ((r = gpu_array_upload(vk, &no_surface, 1, sizeof no_surface, 0, "surfaces (placeholder)", &out->surfaces)) !=
+        VKRT_OK)
         goto fail;
     VkBufferUsageFlags usage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT;
-    /* The table has room for the surfaces, whose pieces are as many as the triangles'. */
-    const uint32_t most = out->tris.count > out->nodes.count ? out->tris.count : out->nodes.count;
+    /* The table has room for every piece of every array; the surfaces' are as many as the
+     * triangles' at most (spatial splits copy triangles, not surfaces). */
+    const uint64_t node_pieces = piece_count(node_count, out->split_shift);
+    const uint64_t tri_pieces = piece_count(tri_count, out->split_shift);
+    const uint64_t most = tri_pieces > node_pieces ? tri_pieces : node_pieces;
     const VkDeviceSize table_bytes =
         (VkDeviceSize)(out->split_shift ? VKRT_PIECE_ARRAYS * most : 1) * sizeof(vkrt_gpu_address);
     if ((r = vk_buffer_create(vk, table_bytes, usage, VK_MEMORY_DEVICE, "vkrt piece table", &out->pieces)) != VKRT_OK)
@@ -191,11 +206,6 @@ vkrt_result gpu_scene_upload(vk_context *vk, const bvh *b, const vkrt_gpu_tri *t
     const vkrt_gpu_address none = { 0, 0 };
     if (!out->split_shift && (r = vk_buffer_upload(vk, &out->pieces, &none, sizeof none)) != VKRT_OK) goto fail;
     if ((r = write_piece_table(vk, out)) != VKRT_OK) goto fail;
-    /* Every binding needs a buffer; these stand in until a mode reads surfaces. */
-    const vkrt_gpu_surface no_surface = { 0 };
-    if ((r = gpu_array_upload(vk, &no_surface, 1, sizeof no_surface, 0, "surfaces (placeholder)", &out->surfaces)) !=
-        VKRT_OK)
-        goto fail;
     vk_buffer *placeholders[3] = { &out->materials, &out->textures, &out->texels };
     const VkDeviceSize placeholder_bytes[3] = { sizeof(vkrt_gpu_material), sizeof(vkrt_gpu_texture),
                                                 2 * sizeof(uint32_t) };
@@ -203,12 +213,67 @@ vkrt_result gpu_scene_upload(vk_context *vk, const bvh *b, const vkrt_gpu_tri *t
         if ((r = vk_buffer_create(vk, placeholder_bytes[i], usage, VK_MEMORY_DEVICE, "vkrt surfaces (placeholder)",
                                   placeholders[i])) != VKRT_OK)
             goto fail;
-    if ((r = upload_wide(vk, b, tris, out)) != VKRT_OK) goto fail;
-    out->node_count = node_count;
-    out->tri_count = tri_count;
+    uint64_t unfit_bytes;
+    if ((r = upload_wide(vk, b, tris, out, &unfit_bytes)) != VKRT_OK) goto fail;
+    /* Without the wide arrays every traversal reads the binary ones. */
+    if (!out->wide && (r = gpu_scene_upload_arrays(vk, out, b, tris, GPU_ARRAY_NODES | GPU_ARRAY_TRIS)) != VKRT_OK)
+        goto fail;
+    if (unfit_bytes)
+        core_log(vk->core, VKRT_LOG_WARN,
+                 "the 4-wide BVH of %u triangles (%llu bytes) does not fit the device memory left; the scene is "
+                 "traced through its binary BVH",
+                 tri_count, (unsigned long long)unfit_bytes);
     return VKRT_OK;
 fail:
     gpu_scene_destroy(vk, out);
+    return r;
+}
+
+vkrt_result gpu_scene_upload_arrays(vk_context *vk, gpu_scene *s, const bvh *b, const vkrt_gpu_tri *tris,
+                                    uint32_t arrays)
+{
+    struct {
+        uint32_t bit;
+        bool *uploaded;
+        gpu_array *target;
+        const void *data;
+        uint32_t count;
+        size_t elem_size;
+        const char *label;
+        gpu_array fresh, old;
+    } parts[] = {
+        { GPU_ARRAY_NODES, &s->nodes_uploaded, &s->nodes, b->nodes, b->node_count, sizeof *b->nodes, "BVH nodes",
+          { 0 }, { 0 } },
+        { GPU_ARRAY_TRIS, &s->tris_uploaded, &s->tris, tris, b->tri_count, sizeof *tris, "triangles", { 0 }, { 0 } },
+    };
+    enum { PARTS = sizeof parts / sizeof parts[0] };
+    assert(b->node_count == s->node_count && b->tri_count == s->tri_count);
+    vkrt_result r = VKRT_OK;
+    bool any = false;
+    for (int i = 0; i < PARTS && r == VKRT_OK; i++) {
+        if (!(arrays & parts[i].bit) || *parts[i].uploaded) continue;
+        any = true;
+        r = gpu_array_upload(vk, parts[i].data, parts[i].count, parts[i].elem_size, s->split_shift, parts[i].label,
+                             &parts[i].fresh);
+    }
+    if (!any) return VKRT_OK;
+    if (r == VKRT_OK) {
+        for (int i = 0; i < PARTS; i++) {
+            if (!parts[i].fresh.pieces) continue;
+            parts[i].old = *parts[i].target;
+            *parts[i].target = parts[i].fresh;
+            *parts[i].uploaded = true;
+        }
+        r = write_piece_table(vk, s);
+        /* Without their table entries a split scene's arrays cannot be read: back to the
+         * placeholders, which the table does not name. */
+        for (int i = 0; i < PARTS && r != VKRT_OK; i++) {
+            if (!parts[i].fresh.pieces) continue;
+            *parts[i].target = parts[i].old;
+            *parts[i].uploaded = false;
+        }
+    }
+    for (int i = 0; i < PARTS; i++) gpu_array_destroy(vk, r == VKRT_OK ? &parts[i].old : &parts[i].fresh);
     return r;
 }
 
@@ -233,7 +298,7 @@ void gpu_scene_usage(const gpu_scene *s, uint64_t *out_bytes, uint32_t *out_buff
     for (int a = 0; a < 3; a++)
         for (uint32_t k = 0; k < arrays[a]->count; k++) bytes += arrays[a]->pieces[k].allocated;
     *out_bytes = bytes;
-    *out_buffers = s->nodes.count + s->tris.count;
+    *out_buffers = (s->nodes_uploaded ? s->nodes.count : 0) + (s->tris_uploaded ? s->tris.count : 0);
 }
 
 uint64_t gpu_scene_traversal_bytes(const gpu_scene *s)
@@ -853,9 +918,48 @@ static void pacer_for(const vk_context *vk, const gpu_scene *scene, bool naive, 
     gpu_pacer_init(p, target, VKRT_TRACE_GROUP_SIZE, max_units, (uint64_t)start, 1);
 }
 
+/* Whether a render goes through the wide BVH: heat and counters are the binary BVH's steps,
+ * which the CPU counts too. */
+static bool render_is_wide(const gpu_scene *scene, const gpu_trace_params *params)
+{
+    return wide_traversal(scene, params->traversal == VKRT_TRAVERSAL_NAIVE) && !params->counters &&
+           params->mode != VKRT_MODE_HEATMAP;
+}
+
+/* The binary arrays a traversal reads: none through the wide BVH, which holds the triangles'
+ * corners and prim_id; the triangles for naive traversal, and the nodes too for the binary
+ * BVH. */
+static uint32_t traversal_arrays(bool wide, bool naive)
+{
+    return wide ? 0u : naive ? GPU_ARRAY_TRIS : GPU_ARRAY_NODES | GPU_ARRAY_TRIS;
+}
+
+uint32_t gpu_trace_render_arrays(const gpu_scene *scene, const gpu_trace_params *params)
+{
+    uint32_t arrays = traversal_arrays(render_is_wide(scene, params), params->traversal == VKRT_TRAVERSAL_NAIVE);
+    /* Normals are shaded from the triangles' vertex normals, and depth refined from their
+     * corners in double; id, albedo and uv read the hit and the surfaces alone. */
+    if (params->mode == VKRT_MODE_NORMAL || params->mode == VKRT_MODE_DEPTH) arrays |= GPU_ARRAY_TRIS;
+    return arrays;
+}
+
+uint32_t gpu_trace_rays_arrays(const gpu_scene *scene, vkrt_traversal traversal)
+{
+    const bool naive = traversal == VKRT_TRAVERSAL_NAIVE;
+    return traversal_arrays(wide_traversal(scene, naive), naive);
+}
+
+/* The arrays a call reads are there (the caller's gpu_scene_upload_arrays); inline, since
+ * only asserts call it. */
+static inline bool arrays_uploaded(const gpu_scene *scene, uint32_t arrays)
+{
+    return (!(arrays & GPU_ARRAY_NODES) || scene->nodes_uploaded) && (!(arrays & GPU_ARRAY_TRIS) || scene->tris_uploaded);
+}
+
 vkrt_result gpu_trace_render(vk_context *vk, const gpu_scene *scene, const gpu_trace_params *params,
                              float *out_rgba, double *out_device_ms, trace_counts *out_counts)
 {
+    assert(arrays_uploaded(scene, gpu_trace_render_arrays(scene, params)));
     *out_device_ms = 0.0;
     *out_counts = (trace_counts){ 0 };
     const uint32_t width = params->camera.width, height = params->camera.height;
@@ -877,8 +981,7 @@ vkrt_result gpu_trace_render(vk_context *vk, const gpu_scene *scene, const gpu_t
     };
     /* Only heatmap reads the heat kind: other modes share one pipeline whatever it is. */
     if (variant.mode != VKRT_GPU_MODE_HEATMAP) variant.heat = VKRT_GPU_HEAT_NODES;
-    /* Heat and counters are the binary BVH's steps, which the CPU counts too. */
-    variant.wide = wide_traversal(scene, naive) && !variant.counters && variant.mode != VKRT_GPU_MODE_HEATMAP;
+    variant.wide = render_is_wide(scene, params);
     vk_trace_pipeline pipe;
     vkrt_result r = vk_trace_pipeline_get(vk, variant, &pipe);
     if (r != VKRT_OK) return r;
@@ -1001,6 +1104,7 @@ static vk_trace_variant ray_variant(const vk_context *vk, const gpu_scene *scene
 vkrt_result gpu_trace_rays(vk_context *vk, const gpu_scene *scene, const gpu_trace_rays_params *params,
                            const vkrt_ray *rays, size_t count, vkrt_hit *out_hits)
 {
+    assert(arrays_uploaded(scene, gpu_trace_rays_arrays(scene, params->traversal)));
     const bool naive = params->traversal == VKRT_TRAVERSAL_NAIVE;
     const vk_trace_variant variant = ray_variant(vk, scene, params, VKRT_GPU_RAYGEN_BUFFER);
     vk_trace_pipeline pipe;
@@ -1060,6 +1164,7 @@ gpu_wavefront_tracer *gpu_wavefront_tracer_alloc(vk_context *vk)
 vkrt_result gpu_wavefront_tracer_init(vk_context *vk, gpu_wavefront_tracer *t, const gpu_scene *scene,
                                       const gpu_trace_rays_params *params, uint32_t capacity)
 {
+    assert(arrays_uploaded(scene, gpu_trace_rays_arrays(scene, params->traversal)));
     const bool naive = params->traversal == VKRT_TRAVERSAL_NAIVE;
     const vk_trace_variant variant = ray_variant(vk, scene, params, VKRT_GPU_RAYGEN_WAVEFRONT);
     vkrt_result r = vk_trace_pipeline_get(vk, variant, &t->pipe);

@@ -20,8 +20,11 @@ typedef struct gpu_array {
 } gpu_array;
 
 typedef struct gpu_scene {
-    gpu_array nodes;
-    gpu_array tris;
+    gpu_array nodes;           /* the binary BVH's nodes and */
+    gpu_array tris;            /* the shading triangles (vkrt_gpu_tri): one-element
+                                  placeholders until a call needs them (gpu_scene_upload_arrays),
+                                  uploaded at once where the scene is traced without the wide
+                                  arrays */
     gpu_array surfaces;        /* vkrt_gpu_surface per triangle, */
     vk_buffer materials;       /* the material table, */
     vk_buffer textures;        /* the texture table and */
@@ -32,6 +35,7 @@ typedef struct gpu_scene {
     uint32_t split_shift;      /* 0: one buffer per array; else log2 of the elements per piece
                                   (VKRT_SPEC_SPLIT of every pipeline that traces the scene) */
     bool surfaces_uploaded;
+    bool nodes_uploaded, tris_uploaded;
     bool wide;                 /* the wide traversal's arrays are there (VKRT_SPEC_WIDE) */
     vk_texel_buffer wide_nodes; /* its nodes and */
     vk_texel_buffer trace_tris; /* triangles (one-texel placeholders without them) */
@@ -40,17 +44,28 @@ typedef struct gpu_scene {
     uint32_t tri_count;
 } gpu_scene;
 
-/* Uploads the BVH nodes and the triangles (b->tri_count of them, in BVH order), and, where
- * the scene fits one buffer per array and the wide traversal can trace it, the wide BVH and
- * the triangles' corners as texel buffers. Where the triangles exceed what one buffer may
- * hold (the device's maxStorageBufferRange and maxMemoryAllocationSize, or the smaller
- * vk->scene_buffer_limit), every array of the scene is split into pieces; on a device without
+/* Uploads the wide BVH and its triangles' corners as texel buffers where the wide traversal
+ * can trace the scene (b->tri_count triangles, in BVH order), and the binary BVH's nodes and
+ * the shading triangles only where it cannot: otherwise those wait for a call that reads them
+ * (gpu_scene_upload_arrays). Where the triangles exceed what one buffer may hold (the device's
+ * maxStorageBufferRange and maxMemoryAllocationSize, or the smaller vk->scene_buffer_limit),
+ * every storage array of the scene is split into pieces; on a device without
  * bufferDeviceAddress that fails with VKRT_ERROR_LIMIT, naming the array and the limit. */
 vkrt_result gpu_scene_upload(vk_context *vk, const bvh *b, const vkrt_gpu_tri *tris, gpu_scene *out);
 void gpu_scene_destroy(vk_context *vk, gpu_scene *s);
 
+/* The binary arrays a call reads (gpu_trace_render_arrays, gpu_trace_rays_arrays). */
+enum { GPU_ARRAY_NODES = 1u, GPU_ARRAY_TRIS = 2u };
+
+/* Uploads those of `arrays` not yet on the device from the scene's host copies (the ones
+ * gpu_scene_upload was given), replacing their placeholders; a no-op for those already there.
+ * On failure the scene is as it was. */
+vkrt_result gpu_scene_upload_arrays(vk_context *vk, gpu_scene *s, const bvh *b, const vkrt_gpu_tri *tris,
+                                    uint32_t arrays);
+
 /* What the scene holds on the device: the bytes of its memory allocations, and the storage
- * buffers of its nodes and triangles (2 unless it is split). */
+ * buffers of its binary nodes and shading triangles there (none until a call reads them; 2
+ * once both are, more where the scene is split). */
 void gpu_scene_usage(const gpu_scene *s, uint64_t *out_bytes, uint32_t *out_buffers);
 
 /* The bytes of the arrays the scene's traversal reads (vkrt_scene_stats.traversal_bytes). */
@@ -87,6 +102,10 @@ typedef struct gpu_trace_params {
     void *progress_user;
 } gpu_trace_params;
 
+/* The binary arrays (GPU_ARRAY_*) gpu_trace_render reads for `params`; the caller uploads them
+ * first. */
+uint32_t gpu_trace_render_arrays(const gpu_scene *scene, const gpu_trace_params *params);
+
 /* Writes width * height * 4 floats (rows top to bottom) to out_rgba; *out_device_ms gets the
  * summed device time of the trace dispatches (0 where the queue has no timestamps), and
  * *out_counts the traversal counters (zero unless params->counters). */
@@ -102,6 +121,10 @@ typedef struct gpu_trace_rays_params {
     vkrt_progress_fn progress;    /* may be NULL; called between submissions */
     void *progress_user;
 } gpu_trace_rays_params;
+
+/* The binary arrays a traversal of rays reads (gpu_trace_rays and the wavefront's tracers; the
+ * wavefront's shade stage reads the triangles besides). */
+uint32_t gpu_trace_rays_arrays(const gpu_scene *scene, vkrt_traversal traversal);
 
 /* The closest hit of each ray (see vkrt_trace_rays), VKRT_RAY_CHUNK rays per submission
  * (VKRT_RESUME_RAY_CHUNK with a loop budget, plus resume submissions while any is unfinished). */

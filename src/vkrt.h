@@ -237,8 +237,9 @@ typedef struct vkrt_scene_desc {
 typedef struct vkrt_scene vkrt_scene;
 
 /* Loads a mesh (or makes the built-in scene), builds its BVH and, for the GPU backend,
- * uploads it (split across storage buffers where its triangles exceed one; see
- * vkrt_scene_stats.device_buffers). Bad input returns VKRT_ERROR_IO, _PARSE, _INVALID_GEOMETRY,
+ * uploads what its traversal reads (the other arrays wait until a call reads them; split
+ * across storage buffers where the triangles exceed one: see vkrt_scene_stats.device_bytes and
+ * device_buffers). Bad input returns VKRT_ERROR_IO, _PARSE, _INVALID_GEOMETRY,
  * _EMPTY_SCENE or _UNSUPPORTED with a message naming the file and the problem; a device that
  * cannot hold the scene VKRT_ERROR_OUT_OF_DEVICE_MEMORY, or VKRT_ERROR_LIMIT where it cannot
  * split it. The scene belongs to ctx and must be destroyed before it. */
@@ -255,8 +256,9 @@ typedef struct vkrt_scene_stats {
     uint64_t leaf_histogram[VKRT_LEAF_HISTOGRAM_BINS]; /* [i]: leaves with i + 1 triangles */
     double sah_cost;               /* C_trav = C_isect = 1, relative to the root's area */
     double load_ms, build_ms;      /* wall-clock times of parsing and BVH construction */
-    uint64_t node_bytes, triangle_bytes; /* device (and CPU backend) buffers; the CPU backend's
-                                            nodes include its 4-wide BVH */
+    uint64_t node_bytes, triangle_bytes; /* the binary BVH's nodes and the shading triangles
+                                            (on the device once a call reads them); the CPU
+                                            backend's nodes include its 4-wide BVH */
     float bounds_min[3], bounds_max[3];  /* of the scene as traced */
     uint32_t materials;            /* materials in the table: the file's (or the meshes') that
                                       triangles use, and the default where one names none */
@@ -274,11 +276,18 @@ typedef struct vkrt_scene_stats {
     uint64_t emissive_triangles;   /* triangles whose material emits: the area lights */
     bool has_metals;               /* some material is metallic (the lighting modes' GGX code) */
     uint64_t device_bytes;         /* GPU backend: the device memory the scene holds now, as
-                                      allocated (nodes, triangles, the piece table of a split
-                                      scene, and the surfaces once a render has uploaded them);
-                                      0 on the CPU backend */
-    uint32_t device_buffers;       /* GPU backend: storage buffers holding the nodes and the
-                                      triangles: 2, or more where the triangles exceed what one
+                                      allocated: the 4-wide BVH and its triangles (the piece
+                                      table of a split scene); the binary nodes and shading
+                                      triangles once a call reads them (normal and depth modes
+                                      the triangles; the heat map, traversal counters, naive
+                                      traversal and the lighting modes the nodes too, or the
+                                      triangles alone where they trace through the wide BVH);
+                                      the surfaces once a render has uploaded them. A scene
+                                      beyond the wide BVH's limits holds the binary arrays from
+                                      the start. 0 on the CPU backend */
+    uint32_t device_buffers;       /* GPU backend: storage buffers holding the binary nodes and
+                                      the shading triangles: 0 before a call reads them, 1 or 2
+                                      after (as above), more where the triangles exceed what one
                                       buffer of the device may hold (maxStorageBufferRange) and
                                       the scene is split across buffers; 0 on the CPU backend */
     uint64_t traversal_bytes;      /* the arrays a ray's traversal reads, what to set against

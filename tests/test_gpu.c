@@ -606,6 +606,10 @@ static void gpu_wide_traversal_matches_the_binary_one(void)
     fprintf(stderr, "  traversal arrays: wide %.1f, binary %.1f bytes a triangle\n", wide_bytes, binary_bytes);
     CHECK_MSG(wide_bytes > 40.0 && wide_bytes <= 64.0 && wide_bytes < binary_bytes,
               "wide arrays %.1f bytes a triangle (binary %.1f)", wide_bytes, binary_bytes);
+    /* The binary scene holds its arrays from the start; the wide one holds the wide arrays (and
+     * one-element placeholders) until a call reads the binary ones. */
+    CHECK_MSG(ws.device_buffers == 0 && bs.device_buffers == 2, "binary arrays' buffers: wide %u, binary %u",
+              ws.device_buffers, bs.device_buffers);
     const size_t n = VKRT_RAY_CHUNK + 777;
     vkrt_ray *rays = random_rays_in_box(n, 99);
     /* Every fourth ray parallel to one or two axes (+-0 components) with its origin on box
@@ -647,6 +651,15 @@ static void gpu_wide_traversal_matches_the_binary_one(void)
             free(b);
         }
     free(rays);
+    /* Rays traced through the wide BVH alone: the scene's device memory is still within issue
+     * 7's 64 bytes a triangle. */
+    vkrt_scene_stats traced;
+    CHECK(vkrt_scene_stats_get(wide, &traced) == VKRT_OK);
+    const double device_bytes = (double)traced.device_bytes / (double)traced.triangles;
+    fprintf(stderr, "  device memory after the traces: %.1f bytes a triangle (binary scene %.1f)\n", device_bytes,
+            (double)bs.device_bytes / (double)bs.triangles);
+    CHECK_MSG(traced.device_buffers == 0 && device_bytes <= 64.0, "after the traces: %u buffers, %.1f bytes a triangle",
+              traced.device_buffers, device_bytes);
     for (vkrt_mode m = VKRT_MODE_NORMAL; m <= VKRT_MODE_ID; m++) {
         if (m == VKRT_MODE_HEATMAP) continue; /* the binary BVH's steps, whichever the scene has */
         vkrt_render_desc rd = { .width = 96, .height = 80, .mode = m };
@@ -655,6 +668,10 @@ static void gpu_wide_traversal_matches_the_binary_one(void)
         free(a);
         free(c);
     }
+    /* Normals and depth read the shading triangles; no render here read the binary nodes. */
+    CHECK(vkrt_scene_stats_get(wide, &traced) == VKRT_OK);
+    CHECK_MSG(traced.device_buffers == 1 && traced.device_bytes >= ws.traversal_bytes + traced.triangle_bytes,
+              "after the renders: %u buffers, %" PRIu64 " bytes", traced.device_buffers, traced.device_bytes);
 done:
     vkrt_scene_destroy(wide);
     vkrt_scene_destroy(binary);
