@@ -842,15 +842,13 @@ static int command_info(options *o)
     /* Through the wide BVH the binary nodes and shading triangles wait on the host until a mode
      * reads them (normal and depth shading, the heat map, naive traversal, the lighting modes). */
     if (on_device && s.device_buffers)
-        printf("device        %" PRIu64 " bytes on %s (%.1f per triangle), the binary nodes and triangles in %u storage "
-               "buffers%s\n",
-               s.device_bytes, vkrt_context_device_name(ctx), (double)s.device_bytes * per_tri, s.device_buffers,
+        printf("device        %" PRIu64 " bytes on %s, the binary nodes and triangles in %u storage buffers%s\n",
+               s.device_bytes, vkrt_context_device_name(ctx), s.device_buffers,
                s.device_buffers > 2 ? " (split: the triangles exceed one buffer of this device)" : "");
     else if (on_device)
-        printf("device        %" PRIu64 " bytes on %s (%.1f per triangle): the wide BVH alone, %.1f per triangle more "
-               "once a mode reads the binary nodes and triangles\n",
-               s.device_bytes, vkrt_context_device_name(ctx), (double)s.device_bytes * per_tri,
-               (double)(s.node_bytes + s.triangle_bytes) * per_tri);
+        printf("device        %" PRIu64 " bytes on %s: the wide BVH alone, %.1f per triangle more once a mode reads "
+               "the binary nodes and triangles\n",
+               s.device_bytes, vkrt_context_device_name(ctx), (double)(s.node_bytes + s.triangle_bytes) * per_tri);
     printf("bounds        (%g, %g, %g) - (%g, %g, %g)\n", s.bounds_min[0], s.bounds_min[1], s.bounds_min[2],
            s.bounds_max[0], s.bounds_max[1], s.bounds_max[2]);
     printf("leaf sizes   ");
