@@ -2,6 +2,7 @@
 
 #include <stdio.h>
 #include <string.h>
+#include <unistd.h>
 
 #include "../shaders/vkrt_shared.h"
 #include "vk_pipeline.h"
@@ -366,7 +367,8 @@ static vkrt_result create_pipeline_cache(vk_context *vk, const char *path)
     return VKRT_OK;
 }
 
-/* Written to a temporary name and renamed, so concurrent processes never read half a file. */
+/* Written to a temporary name and renamed, so concurrent processes never read half a file; the
+ * name holds the process id (two processes may hold contexts at the same address). */
 static void save_pipeline_cache(vk_context *vk)
 {
     if (!vk->pipeline_cache || !vk->pipeline_cache_path) return;
@@ -375,10 +377,10 @@ static void save_pipeline_cache(vk_context *vk)
     void *data = core_alloc(vk->core, size);
     if (!data) return;
     if (vkGetPipelineCacheData(vk->device, vk->pipeline_cache, &size, data) == VK_SUCCESS) {
-        size_t n = strlen(vk->pipeline_cache_path) + 32;
+        size_t n = strlen(vk->pipeline_cache_path) + 64;
         char *tmp = core_alloc(vk->core, n);
         if (tmp) {
-            snprintf(tmp, n, "%s.tmp%p", vk->pipeline_cache_path, (void *)vk);
+            snprintf(tmp, n, "%s.tmp%ld.%p", vk->pipeline_cache_path, (long)getpid(), (void *)vk);
             FILE *f = fopen(tmp, "wb");
             if (f) {
                 bool ok = fwrite(data, 1, size, f) == size;
