@@ -8,9 +8,11 @@
  * nothing but the time. Heat and counters stay with trace_bvh: they count the binary BVH's
  * steps, which the CPU reference counts too.
  *
- * The loop has the shape of trace_bvh's: one flat loop whose iteration pops a stack entry,
- * visits a node, or tests one triangle (the first of a leaf together with the step that
- * reached it), budgeted in the same way (VKRT_SPEC_BUDGET) with the same continuation state.
+ * The loop has the shape of trace_bvh's: one flat loop, budgeted in the same way
+ * (VKRT_SPEC_BUDGET: iterations) with the same continuation state. Each of its steps pops a
+ * stack entry, visits a node, or tests one triangle (the first of a leaf together with the
+ * step that reached it); an iteration runs WIDE_STEPS of them after taking a new ray where the
+ * lane's is done.
  *
  * Included by trace.comp after test_triangle_data, mark_finished, load_wide_ray, load_wide_tri,
  * store_wide_hit_tri and the next_slot counter. */
@@ -156,6 +158,96 @@ uint take_ray_slot(uint steps)
         sp++;                                                   \
     }
 
+/* Steps a loop iteration runs (WIDE_STEP, written out that many times) where lanes take new
+ * rays. The iteration's other work (the hit word's store, the test for a finished ray, the
+ * refill, the loop's own bookkeeping) runs for all eight lanes of a SIMD group in every
+ * iteration, whether a lane needs it or not, so four steps share it; a lane whose ray ends in
+ * an iteration's first step idles for the rest of it. Measured against one step an iteration
+ * (dragon_200k and the full dragon, 1024x1024): four steps 0.80-0.94x the time on AO rays,
+ * primary rays within the noise; on dragon_200k two 0.88-0.95x, three 0.83-0.88x, six no
+ * better than four, eight 1.1-1.5x slower (README, issue 7's thirteenth session). The
+ * camera's rays take no new ray: one step. Written out rather than as an inner loop, so that
+ * there is one loop, whose iterations the budget bounds as lavapipe counts them. */
+const uint WIDE_STEPS = WIDE_REFILL ? 4u : 1u;
+
+/* One step of trace_wide's loop: one stack entry popped, and a triangle tested and a node
+ * visited where the lane has them. A macro, not a function, for the stack arrays (as
+ * WIDE_PUSH_SLOT); the loop runs it WIDE_STEPS times an iteration. */
+#define WIDE_STEP()                                                                              \
+    {                                                                                            \
+        /* One stack entry a step: dropped if it starts beyond the closest hit found since (it   \
+         * cannot improve it), else taken by whichever stage is free for it, a leaf waiting on   \
+         * top while another leaf's triangles are being tested. */                               \
+        if (tri == NO_TRI && held != NO_NODE) {                                                  \
+            if (!(held_tnear > prune_bound(best.t))) tri = held & ~VKRT_WIDE_LEAF;               \
+            held = NO_NODE;                                                                      \
+        }                                                                                        \
+        if (sp > 0u) {                                                                           \
+            uint top = stack_ref[sp - 1u];                                                       \
+            float top_tnear = stack_tnear[sp - 1u];                                              \
+            bool leaf = (top & VKRT_WIDE_LEAF) != 0u;                                            \
+            if (top_tnear > prune_bound(best.t)) {                                               \
+                sp--;                                                                            \
+            } else if (leaf && tri == NO_TRI) {                                                  \
+                tri = top & ~VKRT_WIDE_LEAF;                                                     \
+                sp--;                                                                            \
+            } else if (leaf && held == NO_NODE) {                                                \
+                held = top;                                                                      \
+                held_tnear = top_tnear;                                                          \
+                sp--;                                                                            \
+            } else if (!leaf && node == NO_NODE) {                                               \
+                node = top;                                                                      \
+                sp--;                                                                            \
+            }                                                                                    \
+        }                                                                                        \
+        /* Every step runs both stages where it has work for them: lavapipe executes the whole   \
+         * loop body for all eight lanes of a SIMD group anyway, so a step that tests a triangle \
+         * and visits a node costs what one doing either costs. Both stages' reads come first    \
+         * (node 0 and triangle 0 for an idle stage), so that the node's wait on memory overlaps \
+         * the triangle's: read inside its stage, after the triangle test, the node was fetched  \
+         * only once the test's hundreds of instructions had passed through the CPU's reorder    \
+         * window. 5-9% less time on any-hit AO rays, the same on others (in-process A/B). */    \
+        wide_node visited = load_wide_node(node == NO_NODE ? 0u : node);                         \
+        bool last;                                                                               \
+        vkrt_gpu_tri tested = load_wide_tri(tri == NO_TRI ? 0u : tri, last);                     \
+        if (tri != NO_TRI) {                                                                     \
+            test_triangle_data(r, tri, tested, best);                                            \
+            tri = last ? NO_TRI : tri + 1u;                                                      \
+            /* An occlusion query is answered by the first hit. */                               \
+            if (ANYHIT != 0u && best.prim != NO_PRIM) {                                          \
+                if (!WIDE_REFILL) break;                                                         \
+                sp = 0u;                                                                         \
+                tri = NO_TRI;                                                                    \
+                node = NO_NODE;                                                                  \
+                held = NO_NODE;                                                                  \
+            }                                                                                    \
+        }                                                                                        \
+        if (node != NO_NODE) {                                                                   \
+            uvec4 keys, children = visited.children;                                             \
+            uint entered = visit_wide_node(r, visited, best.t, keys);                            \
+            node = NO_NODE;                                                                      \
+            /* The farther children on the stack, farthest first; the nearest to a free stage,   \
+             * or on top of them. Never full: the host keeps the wide BVH within a third of the  \
+             * stack's levels. */                                                                \
+            if (entered > 3u) WIDE_PUSH_SLOT(keys.w);                                            \
+            if (entered > 2u) WIDE_PUSH_SLOT(keys.z);                                            \
+            if (entered > 1u) WIDE_PUSH_SLOT(keys.y);                                            \
+            uint nearest = children[keys.x & 3u];                                                \
+            if (entered > 0u) {                                                                  \
+                if ((nearest & VKRT_WIDE_LEAF) == 0u) {                                          \
+                    node = nearest;                                                              \
+                } else if (tri == NO_TRI) {                                                      \
+                    tri = nearest & ~VKRT_WIDE_LEAF;                                             \
+                } else if (held == NO_NODE) {                                                    \
+                    held = nearest;                                                              \
+                    held_tnear = key_float(keys.x & ~3u);                                        \
+                } else {                                                                         \
+                    WIDE_PUSH_SLOT(keys.x);                                                      \
+                }                                                                                \
+            }                                                                                    \
+        }                                                                                        \
+    }
+
 /* The closest (or, ANYHIT, any) hit of r, as trace_bvh finds it; with WIDE_RAYS > 1 the hits of
  * ray slot `rays`' rays from its k-th on (r is that one, `valid` whether it may hit anything),
  * then of the slots take_ray_slot gives, each ray's triangle stored by store_wide_hit_tri.
@@ -198,11 +290,11 @@ bool trace_wide(ray r, bool valid, uint slot, uint rays, uint k, inout hit best)
             }
             steps++;
         }
-        /* The ray's closest triangle so far, stored by every lane in every step, not by the
-         * lanes whose ray has just ended: lavapipe stores a lane at a time, branching on each
-         * lane's bit of the mask, and a mask that changes from step to step mispredicts those
-         * branches (5% of a primary-ray trace's time). A ray's last store is the one made in
-         * the step that finds it done, below. */
+        /* The ray's closest triangle so far, stored by every lane in every iteration, not by
+         * the lanes whose ray has just ended: lavapipe stores a lane at a time, branching on
+         * each lane's bit of the mask, and a mask that changes from one iteration to the next
+         * mispredicts those branches (5% of a primary-ray trace's time). A ray's last store is
+         * the one made in the iteration that finds it done, below. */
         if (WIDE_REFILL) store_wide_hit_tri(wide_ray_index(rays, k), best);
         if (node == NO_NODE && tri == NO_TRI && sp == 0u && held == NO_NODE) {
             if (!WIDE_REFILL) break;
@@ -219,76 +311,15 @@ bool trace_wide(ray r, bool valid, uint slot, uint rays, uint k, inout hit best)
             best = hit(r.tmax, 0.0, 0.0, NO_PRIM, NO_PRIM);
             node = valid ? 0u : NO_NODE;
         }
-        /* One stack entry a step: dropped if it starts beyond the closest hit found since (it
-         * cannot improve it), else taken by whichever stage is free for it, a leaf waiting on
-         * top while another leaf's triangles are being tested. */
-        if (tri == NO_TRI && held != NO_NODE) {
-            if (!(held_tnear > prune_bound(best.t))) tri = held & ~VKRT_WIDE_LEAF;
-            held = NO_NODE;
+        WIDE_STEP();
+        if (WIDE_STEPS >= 2u) {
+            WIDE_STEP();
         }
-        if (sp > 0u) {
-            uint top = stack_ref[sp - 1u];
-            float top_tnear = stack_tnear[sp - 1u];
-            bool leaf = (top & VKRT_WIDE_LEAF) != 0u;
-            if (top_tnear > prune_bound(best.t)) {
-                sp--;
-            } else if (leaf && tri == NO_TRI) {
-                tri = top & ~VKRT_WIDE_LEAF;
-                sp--;
-            } else if (leaf && held == NO_NODE) {
-                held = top;
-                held_tnear = top_tnear;
-                sp--;
-            } else if (!leaf && node == NO_NODE) {
-                node = top;
-                sp--;
-            }
+        if (WIDE_STEPS >= 3u) {
+            WIDE_STEP();
         }
-        /* Every step runs both stages where it has work for them: lavapipe executes the whole
-         * loop body for all eight lanes of a SIMD group anyway, so a step that tests a triangle
-         * and visits a node costs what one doing either costs. Both stages' reads come first
-         * (node 0 and triangle 0 for an idle stage), so that the node's wait on memory overlaps
-         * the triangle's: read inside its stage, after the triangle test, the node was fetched
-         * only once the test's hundreds of instructions had passed through the CPU's reorder
-         * window. 5-9% less time on any-hit AO rays, the same on others (in-process A/B). */
-        wide_node visited = load_wide_node(node == NO_NODE ? 0u : node);
-        bool last;
-        vkrt_gpu_tri tested = load_wide_tri(tri == NO_TRI ? 0u : tri, last);
-        if (tri != NO_TRI) {
-            test_triangle_data(r, tri, tested, best);
-            tri = last ? NO_TRI : tri + 1u;
-            /* An occlusion query is answered by the first hit. */
-            if (ANYHIT != 0u && best.prim != NO_PRIM) {
-                if (!WIDE_REFILL) break;
-                sp = 0u;
-                tri = NO_TRI;
-                node = NO_NODE;
-                held = NO_NODE;
-            }
-        }
-        if (node != NO_NODE) {
-            uvec4 keys, children = visited.children;
-            uint entered = visit_wide_node(r, visited, best.t, keys);
-            node = NO_NODE;
-            /* The farther children on the stack, farthest first; the nearest to a free stage,
-             * or on top of them. Never full: the host keeps the wide BVH within a third of the
-             * stack's levels. */
-            if (entered > 3u) WIDE_PUSH_SLOT(keys.w);
-            if (entered > 2u) WIDE_PUSH_SLOT(keys.z);
-            if (entered > 1u) WIDE_PUSH_SLOT(keys.y);
-            uint nearest = children[keys.x & 3u];
-            if (entered > 0u) {
-                if ((nearest & VKRT_WIDE_LEAF) == 0u) {
-                    node = nearest;
-                } else if (tri == NO_TRI) {
-                    tri = nearest & ~VKRT_WIDE_LEAF;
-                } else if (held == NO_NODE) {
-                    held = nearest;
-                    held_tnear = key_float(keys.x & ~3u);
-                } else {
-                    WIDE_PUSH_SLOT(keys.x);
-                }
-            }
+        if (WIDE_STEPS >= 4u) {
+            WIDE_STEP();
         }
     }
     /* Saved after the loop, as trace_bvh does (an `if` inside it would cost every iteration). */
