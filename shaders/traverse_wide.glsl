@@ -158,17 +158,18 @@ uint take_ray_slot(uint steps)
         sp++;                                                   \
     }
 
-/* Steps a loop iteration runs (WIDE_STEP, written out that many times) where lanes take new
- * rays. The iteration's other work (the hit word's store, the test for a finished ray, the
+/* Steps a loop iteration runs (1-4: WIDE_STEP, written out that many times) where lanes take
+ * new rays. The iteration's other work (the hit word's store, the test for a finished ray, the
  * refill, the loop's own bookkeeping) runs for all eight lanes of a SIMD group in every
- * iteration, whether a lane needs it or not, so four steps share it; a lane whose ray ends in
- * an iteration's first step idles for the rest of it. Measured against one step an iteration
- * (dragon_200k and the full dragon, 1024x1024): four steps 0.80-0.94x the time on AO rays,
- * primary rays within the noise; on dragon_200k two 0.88-0.95x, three 0.83-0.88x, six no
- * better than four, eight 1.1-1.5x slower (README, issue 7's thirteenth session). The
- * camera's rays take no new ray: one step. Written out rather than as an inner loop, so that
- * there is one loop, whose iterations the budget bounds as lavapipe counts them. */
-const uint WIDE_STEPS = WIDE_REFILL ? 4u : 1u;
+ * iteration, whether a lane needs it or not, so the steps share it; a lane whose ray ends in
+ * an iteration's first step idles for the rest of it, which costs most on rays of few steps.
+ * Measured against one step an iteration (dragon_11k to the full dragon, 1024x1024): two
+ * steps 0.86-0.96x the time on AO rays and 0.92-1.00x on primary rays; four 0.85-0.94x on AO
+ * rays but up to 1.10x on primary rays; six no better than four, eight 1.1-1.5x slower (README,
+ * issue 7's thirteenth session). Two is the most that slows no query. The camera's rays take
+ * no new ray: one step. Written out rather than as an inner loop, so that there is one loop,
+ * whose iterations the budget bounds as lavapipe counts them. */
+const uint WIDE_STEPS = WIDE_REFILL ? 2u : 1u;
 
 /* One step of trace_wide's loop: one stack entry popped, and a triangle tested and a node
  * visited where the lane has them. A macro, not a function, for the stack arrays (as
