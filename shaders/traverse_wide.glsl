@@ -158,9 +158,9 @@ uint take_ray_slot(uint steps)
         sp++;                                                   \
     }
 
-/* Steps a loop iteration runs (1-4: WIDE_STEP, written out that many times) where lanes take
- * new rays. The iteration's other work (the hit word's store, the test for a finished ray, the
- * refill, the loop's own bookkeeping) runs for all eight lanes of a SIMD group in every
+/* Steps a loop iteration runs (1 or 2: WIDE_STEP, written out that many times) where lanes
+ * take new rays. The iteration's other work (the hit word's store, the test for a finished
+ * ray, the refill, the loop's own bookkeeping) runs for all eight lanes of a SIMD group in every
  * iteration, whether a lane needs it or not, so the steps share it; a lane whose ray ends in
  * an iteration's first step idles for the rest of it, which costs most on rays of few steps.
  * Measured against one step an iteration (dragon_11k to the full dragon, 1024x1024): two
@@ -313,13 +313,7 @@ bool trace_wide(ray r, bool valid, uint slot, uint rays, uint k, inout hit best)
             node = valid ? 0u : NO_NODE;
         }
         WIDE_STEP();
-        if (WIDE_STEPS >= 2u) {
-            WIDE_STEP();
-        }
-        if (WIDE_STEPS >= 3u) {
-            WIDE_STEP();
-        }
-        if (WIDE_STEPS >= 4u) {
+        if (WIDE_STEPS == 2u) {
             WIDE_STEP();
         }
     }
