@@ -18,6 +18,10 @@
 #ifndef VKRT_TRACE_COMMON_GLSL
 #define VKRT_TRACE_COMMON_GLSL
 
+/* Every division and square root below goes through div_rn and sqrt_rn, correctly rounded as
+ * C's are on any device (rounding.glsl). */
+#include "rounding.glsl"
+
 #define NO_PRIM 0xFFFFFFFFu
 #define T_INFINITY uintBitsToFloat(0x7F800000u)
 
@@ -40,7 +44,7 @@ ray ray_setup(vec3 origin, vec3 dir, float tmin, float tmax)
     ray r;
     r.origin = origin;
     r.dir = dir;
-    r.inv_dir = vec3(1.0) / dir;
+    r.inv_dir = div_rn(vec3(1.0), dir);
     r.tmin = tmin;
     r.tmax = tmax;
     float ax = abs(dir.x), ay = abs(dir.y), az = abs(dir.z);
@@ -53,19 +57,19 @@ ray ray_setup(vec3 origin, vec3 dir, float tmin, float tmax)
         r.ky = k;
     }
     float dz = dir[r.kz];
-    r.sx = dir[r.kx] / dz;
-    r.sy = dir[r.ky] / dz;
-    r.sz = 1.0 / dz;
+    r.sx = div_rn(dir[r.kx], dz);
+    r.sy = div_rn(dir[r.ky], dz);
+    r.sz = div_rn(1.0, dz);
     return r;
 }
 
 ray camera_ray(vkrt_gpu_push p, uint x, uint y)
 {
-    float sx = 2.0 * (float(x) + 0.5) / float(p.width) - 1.0;
-    float sy = 1.0 - 2.0 * (float(y) + 0.5) / float(p.height);
+    precise float sx = div_rn(2.0 * (float(x) + 0.5), float(p.width)) - 1.0;
+    precise float sy = 1.0 - div_rn(2.0 * (float(y) + 0.5), float(p.height));
     precise vec3 d = (p.forward + p.right * sx) + p.up * sy;
     precise float len2 = (d.x * d.x + d.y * d.y) + d.z * d.z;
-    precise vec3 dir = d * (1.0 / sqrt(len2));
+    precise vec3 dir = d * div_rn(1.0, sqrt_rn(len2));
     return ray_setup(p.eye, dir, 0.0, T_INFINITY);
 }
 
@@ -102,7 +106,7 @@ bool intersect_triangle_moller_trumbore(ray r, vkrt_gpu_tri tri, inout float out
     precise vec3 pvec = cross3(r.dir, e2);
     precise float det = dot3(e1, pvec);
     if (det == 0.0) return false;
-    precise float inv_det = 1.0 / det;
+    precise float inv_det = div_rn(1.0, det);
     precise vec3 tvec = r.origin - tri.v0;
     precise float u = dot3(tvec, pvec) * inv_det;
     precise vec3 qvec = cross3(tvec, e1);
@@ -141,7 +145,7 @@ bool intersect_triangle_watertight(ray r, vkrt_gpu_tri tri, inout float out_t, i
     precise float det = (eu + ev) + ew;
     if (det == 0.0) return false;
     precise float t_scaled = (eu * (r.sz * a_z) + ev * (r.sz * b_z)) + ew * (r.sz * c_z);
-    precise float inv_det = 1.0 / det;
+    precise float inv_det = div_rn(1.0, det);
     precise float t = t_scaled * inv_det;
     if (!(t > r.tmin && t < r.tmax)) return false;
     out_t = t;
@@ -261,17 +265,18 @@ vec3 normal_decode(uint packed)
     float t = -n.z > 0.0 ? -n.z : 0.0;
     n.x += n.x >= 0.0 ? -t : t;
     n.y += n.y >= 0.0 ? -t : t;
-    return n * (1.0 / sqrt((n.x * n.x + n.y * n.y) + n.z * n.z));
+    precise float len2 = (n.x * n.x + n.y * n.y) + n.z * n.z;
+    return n * div_rn(1.0, sqrt_rn(len2));
 }
 
 /* rgb = interpolated unit vertex normal * 0.5 + 0.5. */
 vec4 shade_normal(vkrt_gpu_tri tri, float u, float v)
 {
-    float w = 1.0 - u - v;
-    vec3 n = (normal_decode(tri.n0) * w + normal_decode(tri.n1) * u) + normal_decode(tri.n2) * v;
-    float len2 = (n.x * n.x + n.y * n.y) + n.z * n.z;
+    precise float w = 1.0 - u - v;
+    precise vec3 n = (normal_decode(tri.n0) * w + normal_decode(tri.n1) * u) + normal_decode(tri.n2) * v;
+    precise float len2 = (n.x * n.x + n.y * n.y) + n.z * n.z;
     /* Opposed vertex normals can cancel; the face normal is the only direction left. */
-    n = len2 > 0.0 ? n * (1.0 / sqrt(len2)) : tri.face_n;
+    n = len2 > 0.0 ? n * div_rn(1.0, sqrt_rn(len2)) : tri.face_n;
     return vec4(n * 0.5 + 0.5, 1.0);
 }
 

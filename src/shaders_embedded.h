@@ -10,5 +10,7 @@ extern const char vkrt_shader_shade_comp[];
 extern const char vkrt_shader_layout_check_comp[];
 /* Test only: runs ray_offset() of trace_common.glsl, to compare it with the C one bit for bit. */
 extern const char vkrt_shader_offset_check_comp[];
+/* Test only: runs the emulated correctly rounded division and square root of rounding.glsl. */
+extern const char vkrt_shader_rounding_check_comp[];
 
 #endif

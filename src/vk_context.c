@@ -291,6 +291,10 @@ static vkrt_result create_device(vk_context *vk)
     VkPhysicalDeviceFeatures supported;
     vkGetPhysicalDeviceFeatures(vk->physical, &supported);
     vk->float64 = supported.shaderFloat64 == VK_TRUE;
+    /* Vulkan lets a device's float division be 2.5 ulps off and its square root more; C's and
+     * lavapipe's round correctly. Elsewhere the shaders round them correctly with doubles
+     * (shaders/rounding.glsl), so that the GPU's images equal the CPU backend's bit for bit. */
+    vk->exact_rounding = vk->float64 && !llvmpipe;
     VkPhysicalDeviceFeatures enabled = { .shaderFloat64 = supported.shaderFloat64 };
     /* Buffer device addresses let a scene larger than maxStorageBufferRange be split into
      * pieces (lavapipe has them but not the non-uniform descriptor indexing an array of buffers

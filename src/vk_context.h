@@ -25,6 +25,10 @@ typedef struct vk_context {
     bool timestamps;                  /* the queue supports timestamp queries */
     double timestamp_period_ns;
     bool float64;                     /* shaderFloat64 enabled: the shader refines hit distances in double */
+    bool exact_rounding;              /* the shaders emulate correctly rounded division and square
+                                         root (VKRT_EXACT_ROUNDING): a device with doubles whose
+                                         driver is not lavapipe; tests set it on lavapipe too, before
+                                         the first pipeline is made */
     bool buffer_address;              /* bufferDeviceAddress enabled: a scene beyond one storage buffer
                                          is split into pieces the shaders reach by address */
     VkDeviceSize max_allocation;      /* maxMemoryAllocationSize: one device memory allocation at most */

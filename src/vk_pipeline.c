@@ -127,31 +127,38 @@ static vkrt_result create_layouts(vk_context *vk, vk_pipelines *p)
 /* A shader with "#define VKRT_HAS_FLOAT64" and "#define VKRT_HAS_BUFFER_ADDRESS" after its
  * #version line where the device has doubles and buffer device addresses: the Float64 and
  * PhysicalStorageBufferAddresses capabilities may only appear in a module for a device that
- * enabled them, and a specialization constant cannot remove a capability. NULL when out of
- * memory. */
-static char *shader_source(vk_context *vk, const char *source)
+ * enabled them, and a specialization constant cannot remove a capability. And with
+ * "#define VKRT_EXACT_ROUNDING" where the device's own division and square root may round
+ * otherwise than C's (shaders/rounding.glsl). NULL when out of memory. */
+char *vk_shader_source(vk_context *vk, const char *source)
 {
-    static const char float64[] = "#define VKRT_HAS_FLOAT64 1\n";
-    static const char address[] = "#define VKRT_HAS_BUFFER_ADDRESS 1\n";
+    const char *const defines[] = {
+        vk->float64 ? "#define VKRT_HAS_FLOAT64 1\n" : "",
+        vk->buffer_address ? "#define VKRT_HAS_BUFFER_ADDRESS 1\n" : "",
+        vk->exact_rounding ? "#define VKRT_EXACT_ROUNDING 1\n" : "",
+    };
     const char *version = strstr(source, "#version");
     const char *after = version ? strchr(version, '\n') : NULL;
     size_t head = after ? (size_t)(after + 1 - source) : 0;
-    size_t extra_f = head && vk->float64 ? sizeof float64 - 1 : 0;
-    size_t extra_a = head && vk->buffer_address ? sizeof address - 1 : 0;
+    size_t extra = 0;
+    for (size_t i = 0; head && i < sizeof defines / sizeof defines[0]; i++) extra += strlen(defines[i]);
     size_t length = strlen(source);
-    char *text = core_alloc_array(vk->core, length + extra_f + extra_a + 1, 1);
+    char *text = core_alloc_array(vk->core, length + extra + 1, 1);
     if (!text) return NULL;
     memcpy(text, source, head);
-    memcpy(text + head, float64, extra_f);
-    memcpy(text + head + extra_f, address, extra_a);
-    memcpy(text + head + extra_f + extra_a, source + head, length - head + 1);
+    size_t at = head;
+    for (size_t i = 0; head && i < sizeof defines / sizeof defines[0]; i++) {
+        memcpy(text + at, defines[i], strlen(defines[i]));
+        at += strlen(defines[i]);
+    }
+    memcpy(text + at, source + head, length - head + 1);
     return text;
 }
 
-/* GLSL (the device's flavour, shader_source) -> SPIR-V words, allocated with the core allocator. */
+/* GLSL (the device's flavour, vk_shader_source) -> SPIR-V words, allocated with the core allocator. */
 static vkrt_result compile_shader(vk_context *vk, const char *name, const char *text, uint32_t **out_words, size_t *out_count)
 {
-    char *source = shader_source(vk, text);
+    char *source = vk_shader_source(vk, text);
     if (!source) return core_fail(vk->core, VKRT_ERROR_OUT_OF_MEMORY, "out of memory for the source of %s", name);
     vkrt_result r = vk_compile_glsl(vk->core, name, source, out_words, out_count);
     core_free(vk->core, source);

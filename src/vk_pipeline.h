@@ -54,6 +54,10 @@ vkrt_result vk_shade_pipeline_get(vk_context *vk, vk_shade_variant variant, vk_t
 vkrt_result vk_descriptor_set_create(vk_context *vk, VkDescriptorSetLayout layout, const VkDescriptorPoolSize *sizes,
                                      uint32_t size_count, VkDescriptorPool *out_pool, VkDescriptorSet *out_set);
 
+/* `source` as it is compiled for this device: the defines of its features after the #version
+ * line (VKRT_HAS_FLOAT64, VKRT_HAS_BUFFER_ADDRESS, VKRT_EXACT_ROUNDING). Freed with core_free;
+ * NULL when out of memory. */
+char *vk_shader_source(vk_context *vk, const char *source);
 /* GLSL -> SPIR-V for a compute shader. On success *out_words is allocated with the core
  * allocator (the caller frees it) and *out_count holds its 32-bit words. */
 vkrt_result vk_compile_glsl(core *c, const char *name, const char *source, uint32_t **out_words, size_t *out_count);

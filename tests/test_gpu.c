@@ -1,6 +1,8 @@
 /* The Vulkan path on the device (lavapipe in CI), validation layer on: every pipeline
  * variant compiles and runs, the GPU agrees with the C reference, BVH and naive traversal give
  * identical images, tiling is seamless. Any validation message fails the test. */
+#include <float.h>
+#include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -400,6 +402,19 @@ static void gpu_shared_layouts_match_c(void)
     for (int i = 0; i < BUFFERS; i++) vk_buffer_destroy(gpu->vk, &buffers[i]);
 }
 
+/* Runs a check shader over `count` cases: binding 0 the inputs, binding 1 the outputs it
+ * writes, the count its push constant. Returns the mapped outputs, or NULL once a check has
+ * failed; the caller destroys both buffers either way. */
+static const float *run_check_cases(const char *name, const char *source, const float *inputs, size_t in_floats,
+                                    size_t out_floats, uint32_t count, vk_buffer buffers[2])
+{
+    const void *data[2] = { inputs, NULL };
+    const size_t sizes[2] = { in_floats * sizeof(float), out_floats * sizeof(float) };
+    bool ok = create_check_buffers(buffers, data, sizes, 2);
+    ok = ok && run_check_shader(name, source, buffers, 2, &count, sizeof count, (count + 63) / 64);
+    return ok ? buffers[1].mapped : NULL;
+}
+
 /* ray_offset() in GLSL against the C function, bit for bit, on hit points from 1e-30 to 1e30,
  * zero and negative coordinates, points on both sides of the float/integer switch, and unit
  * normals in every octant and along the axes. */
@@ -421,15 +436,10 @@ static void gpu_ray_offset_matches_c(void)
             inputs[i * 6 + 3 + a] = (float)n[a];
         }
     }
-    vk_buffer buffers[2] = { 0 };
-    const void *data[2] = { inputs, NULL };
-    const size_t sizes[2] = { CASES * 6 * sizeof(float), CASES * 3 * sizeof(float) };
-    const uint32_t count = CASES;
-    bool ok = create_check_buffers(buffers, data, sizes, 2);
-    ok = ok && run_check_shader("offset_check.comp", vkrt_shader_offset_check_comp, buffers, 2, &count, sizeof count,
-                                (CASES + 63) / 64);
-    if (ok) {
-        const float *got = buffers[1].mapped;
+    vk_buffer buffers[2] = { { 0 } };
+    const float *got = run_check_cases("offset_check.comp", vkrt_shader_offset_check_comp, inputs, CASES * 6,
+                                       CASES * 3, CASES, buffers);
+    if (got) {
         size_t differ = 0, moved = 0;
         for (size_t i = 0; i < CASES; i++) {
             const float *in = inputs + i * 6;
@@ -446,6 +456,75 @@ static void gpu_ray_offset_matches_c(void)
                 differ);
         CHECK_MSG(differ == 0, "%zu offset coordinates differ between GLSL and C", differ);
         CHECK_MSG(moved > CASES, "the offset moved only %zu coordinates", moved);
+    }
+    for (int i = 0; i < 2; i++) vk_buffer_destroy(gpu->vk, &buffers[i]);
+    free(inputs);
+}
+
+/* The emulated correctly rounded division and square root (shaders/rounding.glsl, which real
+ * GPUs run) against C's / and sqrtf, bit for bit: random operands over the normal range
+ * (quotients from far below 1 to overflow), operands whose quotient lies within a float
+ * rounding of a midpoint, and the IEEE special cases (zeros of both signs, infinities, NaN).
+ * And the correction step alone, from a first guess an ulp below and an ulp above the right
+ * one: lavapipe's own double division is exact, so only this shows that the step would mend a
+ * device whose double division or root is a little off. Denormal operands and results are
+ * left out: they are left to the device's double result by design. */
+static void gpu_emulated_rounding_matches_c(void)
+{
+    enum { CASES = 1 << 16 };
+    CHECK_MSG(gpu->vk->float64, "the device has no doubles: nothing is emulated");
+    if (!gpu->vk->float64) return;
+    float *inputs = malloc(CASES * 2 * sizeof *inputs);
+    if (!inputs) abort();
+    const float specials[] = { 0.0f, -0.0f, INFINITY, -INFINITY, NAN, 1.0f, -1.0f, 3.0f, FLT_MAX, FLT_MIN, 0.1f };
+    enum { SPECIALS = sizeof specials / sizeof specials[0] };
+    test_rng rng = { 4711 };
+    for (size_t i = 0; i < CASES; i++) {
+        float a, b;
+        if (i < SPECIALS * SPECIALS) {
+            a = specials[i / SPECIALS];
+            b = specials[i % SPECIALS];
+        } else if (i % 2) {
+            /* a / b within a float rounding of the midpoint above a random q in [1, 2). */
+            b = (float)ldexp(1.0 + rng_uniform(&rng), (int)(rng_uniform(&rng) * 120.0) - 60);
+            float q = (float)(1.0 + rng_uniform(&rng));
+            double mid = ((double)q + (double)nextafterf(q, 2.0f)) * 0.5;
+            a = (float)(mid * b);
+        } else {
+            a = (float)ldexp(1.0 + rng_uniform(&rng), (int)(rng_uniform(&rng) * 250.0) - 125);
+            b = (float)ldexp(1.0 + rng_uniform(&rng), (int)(rng_uniform(&rng) * 250.0) - 125);
+            if (fabsf(a / b) < FLT_MIN) b = 1.0f; /* no denormal quotient */
+        }
+        inputs[2 * i] = rng_uniform(&rng) < 0.5 ? a : -a;
+        inputs[2 * i + 1] = rng_uniform(&rng) < 0.5 ? b : -b;
+    }
+    vk_buffer buffers[2] = { { 0 } };
+    const float *got = run_check_cases("rounding_check.comp", vkrt_shader_rounding_check_comp, inputs, CASES * 2,
+                                       CASES * 6, CASES, buffers);
+    if (got) {
+        size_t differ = 0, compared = 0, corrected = 0;
+        for (size_t i = 0; i < CASES; i++) {
+            const float a = inputs[2 * i], b = inputs[2 * i + 1];
+            const float q = fabsf(a) / fabsf(b), s = sqrtf(fabsf(a));
+            /* -ffp-contract=off and ISO C: these are IEEE's correctly rounded operations. */
+            const float want[6] = { a / b, sqrtf(a), q, q, s, s };
+            const bool normal_q = q >= FLT_MIN && q <= 0x1p127f, normal_s = s >= FLT_MIN && s <= 0x1p127f;
+            const bool used[6] = { true, true, normal_q, normal_q, normal_s, normal_s };
+            for (int k = 0; k < 6; k++) {
+                if (!used[k]) continue;
+                const float g = got[i * 6 + k];
+                bool same = (isnan(g) && isnan(want[k])) || memcmp(&g, &want[k], sizeof g) == 0;
+                compared++;
+                corrected += k >= 2 && same;
+                if (!same && differ++ < 5)
+                    fprintf(stderr, "  case %zu output %d: a %.9g b %.9g: C %.9g, GLSL %.9g\n", i, k, (double)a,
+                            (double)b, (double)want[k], (double)g);
+            }
+        }
+        fprintf(stderr, "  %d cases: %zu results compared (%zu from a guess an ulp off), %zu differ\n", CASES,
+                compared, corrected, differ);
+        CHECK_MSG(differ == 0, "%zu emulated results differ from C's", differ);
+        CHECK_MSG(corrected > CASES, "only %zu results from a guess an ulp off were compared", corrected);
     }
     for (int i = 0; i < 2; i++) vk_buffer_destroy(gpu->vk, &buffers[i]);
     free(inputs);
@@ -1216,6 +1295,35 @@ static void gpu_eye_inside_a_closed_mesh_always_hits(void)
     closed_mesh_free(&m);
 }
 
+/* The bit-exact comparisons of the tests above again, in a context whose shaders divide and
+ * take square roots through the emulation that real GPUs run (rounding.glsl): on lavapipe,
+ * whose own operators round correctly, it must change no bit of any image or hit. The shaders
+ * of that context carry the define that selects it, and those of lavapipe's default do not. */
+static void gpu_emulated_rounding_gives_the_same_images(void)
+{
+    vkrt_context *native = gpu, *emulated = NULL;
+    vkrt_context_desc desc = { .backend = VKRT_BACKEND_GPU, .log = check_gpu_log, .validation = true,
+                               .pipeline_cache_path = getenv("VKRT_PIPELINE_CACHE") };
+    CHECK(vkrt_context_create(&desc, &emulated) == VKRT_OK);
+    if (!emulated) return;
+    emulated->vk->exact_rounding = true;
+    const char *define = "#define VKRT_EXACT_ROUNDING";
+    char *plain = vk_shader_source(native->vk, vkrt_shader_trace_comp);
+    char *exact = vk_shader_source(emulated->vk, vkrt_shader_trace_comp);
+    CHECK_MSG(plain && !strstr(plain, define), "lavapipe's own division and square root are not used");
+    CHECK_MSG(exact && strstr(exact, define), "the emulated context's shaders do not emulate");
+    core_free(native->vk->core, plain);
+    core_free(emulated->vk->core, exact);
+    gpu = emulated;
+    gpu_image_beyond_the_loop_limit_matches_cpu();
+    gpu_albedo_and_uv_show_materials_and_texture_coordinates();
+    gpu_alpha_masked_surfaces_let_rays_through();
+    gpu_trace_rays_match_cpu_and_naive();
+    gpu = native;
+    CHECK_EQ_U64(vkrt_context_validation_messages(emulated), 0);
+    vkrt_context_destroy(emulated);
+}
+
 int main(void)
 {
     int code = check_contexts(check_gpu_log, &gpu, &cpu);
@@ -1224,6 +1332,7 @@ int main(void)
     RUN(gpu_validation_messages_are_counted);
     RUN(gpu_shared_layouts_match_c);
     RUN(gpu_ray_offset_matches_c);
+    RUN(gpu_emulated_rounding_matches_c);
     RUN(gpu_every_pipeline_variant_runs);
     RUN(gpu_matches_cpu_reference);
     RUN(gpu_tiles_are_seamless);
@@ -1246,6 +1355,7 @@ int main(void)
     RUN(gpu_traversal_counters_sum_the_heatmap);
     RUN(gpu_albedo_and_uv_show_materials_and_texture_coordinates);
     RUN(gpu_alpha_masked_surfaces_let_rays_through);
+    RUN(gpu_emulated_rounding_gives_the_same_images);
 
     return check_gpu_finish(gpu, cpu);
 }
