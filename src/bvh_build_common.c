@@ -54,11 +54,6 @@ vkrt_result bvh_build_begin_capacity(bvh_build_state *b, core *c, const mesh *m,
         free_all(b);
         return r;
     }
-    /* The references and the order are written whole at once. Not the nodes: a parallel
-     * build leaves holes in them, which huge pages would fill (on the 1e7-triangle scene that
-     * cost more system time than the faults it saved). */
-    core_advise_huge_pages(b->refs, (size_t)ref_capacity * ref_size);
-    core_advise_huge_pages(b->order, (size_t)ref_capacity * sizeof *b->order);
     return VKRT_OK;
 }
 
@@ -169,7 +164,6 @@ vkrt_result bvh_build_finish(bvh_build_state *b, bvh *out)
     if (b->node_count < b->node_cap) {
         vkrt_gpu_node *exact = core_alloc_array(c, b->node_count, sizeof *exact);
         if (exact) {
-            core_advise_huge_pages(exact, (size_t)b->node_count * sizeof *exact);
             memcpy(exact, nodes, (size_t)b->node_count * sizeof *exact);
             core_free(c, nodes);
             nodes = exact;

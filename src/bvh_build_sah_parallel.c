@@ -446,7 +446,6 @@ static void compact(sah_job *j)
     uint32_t count = b->node_cap - holes;
     j->exact = core_alloc_array(b->c, count, sizeof *j->exact);
     if (j->exact) {
-        core_advise_huge_pages(j->exact, (size_t)count * sizeof *j->exact);
         j->exact[0] = nodes[0];
         for (size_t i = 0; i < j->split_count; i++) {
             const top_split *s = &j->splits[i];

@@ -33,10 +33,28 @@ void core_init(core *c, const vkrt_allocator *allocator, vkrt_log_fn log, void *
     c->log_user = log_user;
 }
 
+/* Only whole 4 KiB pages inside the block are advised: the pages around it may belong to other
+ * allocations. A refusal (no THP, memory that is not anonymous, such as a GPU's mapped memory)
+ * changes nothing, so the result is ignored. */
+void core_advise_huge_pages(void *pointer, size_t size)
+{
+#if defined(__linux__) && defined(MADV_HUGEPAGE)
+    const uintptr_t page = 4096;
+    uintptr_t first = ((uintptr_t)pointer + page - 1) & ~(page - 1);
+    uintptr_t end = ((uintptr_t)pointer + size) & ~(page - 1);
+    if (size >= CORE_HUGE_PAGE_MIN && end > first) (void)madvise((void *)first, end - first, MADV_HUGEPAGE);
+#else
+    (void)pointer;
+    (void)size;
+#endif
+}
+
 void *core_alloc(core *c, size_t size)
 {
     /* A zero-byte request still returns a unique pointer, so NULL always means failure. */
-    return c->allocator.alloc(c->allocator.user, size ? size : 1);
+    void *p = c->allocator.alloc(c->allocator.user, size ? size : 1);
+    if (p) core_advise_huge_pages(p, size);
+    return p;
 }
 
 void *core_alloc_array(core *c, size_t count, size_t size)
@@ -55,22 +73,6 @@ void *core_calloc_array(core *c, size_t count, size_t size)
 void core_free(core *c, void *pointer)
 {
     if (pointer) c->allocator.free(c->allocator.user, pointer);
-}
-
-void core_advise_huge_pages(void *pointer, size_t size)
-{
-#if defined(__linux__) && defined(MADV_HUGEPAGE)
-    /* Only whole 4 KiB pages inside the block: the advice is per page, and the pages around
-     * it may belong to other allocations. A refusal (no THP, memory that is not anonymous)
-     * changes nothing, so the result is ignored. */
-    const uintptr_t page = 4096;
-    uintptr_t first = ((uintptr_t)pointer + page - 1) & ~(page - 1);
-    uintptr_t end = ((uintptr_t)pointer + size) & ~(page - 1);
-    if (size >= CORE_HUGE_PAGE_MIN && end > first) (void)madvise((void *)first, end - first, MADV_HUGEPAGE);
-#else
-    (void)pointer;
-    (void)size;
-#endif
 }
 
 int core_grow(core *c, void **array, size_t *capacity, size_t needed, size_t elem_size)

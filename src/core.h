@@ -32,12 +32,15 @@ void *core_alloc(core *c, size_t size);
 void *core_alloc_array(core *c, size_t count, size_t size);
 void *core_calloc_array(core *c, size_t count, size_t size);
 void core_free(core *c, void *pointer);
-/* Asks the system to back the block with huge pages where it can (Linux: transparent huge
- * pages, a hint the kernel may ignore): for large arrays written whole right after allocation,
- * whose first touch of every 4 KiB page otherwise costs a page fault (about 2 us each on the
- * shared test machine; 7% of the full dragon's BVH build). Embree's allocator gives its large
- * blocks the same hint (common/sys/alloc.cpp, os_madvise). Blocks under CORE_HUGE_PAGE_MIN
- * bytes are left alone. Does not allocate; any pointer and size from core_alloc*() is valid. */
+/* Asks the system to back a block of at least CORE_HUGE_PAGE_MIN bytes with huge pages where it
+ * can (Linux: transparent huge pages, a hint the kernel may ignore); smaller blocks are left
+ * alone. core_alloc does it for every block it returns, and vk_buffer for the mapped memory of
+ * a device that keeps its buffers in host memory (lavapipe). The library's large arrays (mesh
+ * arrays, BVH nodes and references, packed triangles, wide nodes, the device's copies of them)
+ * are written soon after they are allocated and then read all over: with 4 KiB pages the first
+ * touch of each costs a page fault (a quarter of the time of loading and building the full
+ * dragon on the shared test machine) and the reads miss the TLB. Embree's allocator gives its
+ * large blocks the same hint (common/sys/alloc.cpp, os_madvise). */
 #define CORE_HUGE_PAGE_MIN ((size_t)4 << 20)
 void core_advise_huge_pages(void *pointer, size_t size);
 /* Grows *array (of elements of elem_size) to hold at least `needed` elements, doubling.

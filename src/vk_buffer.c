@@ -131,6 +131,8 @@ vkrt_result vk_buffer_create(vk_context *vk, VkDeviceSize size, VkBufferUsageFla
             return vk_fail(vk, res, "vkMapMemory");
         }
         out->coherent = flags & VK_MEMORY_PROPERTY_HOST_COHERENT_BIT;
+        /* Before the first write: on lavapipe this is the memory the shaders read. */
+        core_advise_huge_pages(out->mapped, (size_t)req.size);
     }
     return VKRT_OK;
 }

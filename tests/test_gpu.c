@@ -8,6 +8,7 @@
 
 #include "check.h"
 #include "context.h"
+#include "huge_pages.h"
 #include "ray_offset.h"
 #include "shaders_embedded.h"
 #include "trace_fixtures.h"
@@ -1295,6 +1296,28 @@ static void gpu_eye_inside_a_closed_mesh_always_hits(void)
     closed_mesh_free(&m);
 }
 
+/* A CPU device's buffers are ordinary host memory, mapped: vk_buffer asks for huge pages for a
+ * large one before anything is written to it, as core_alloc does for the library's arrays.
+ * (A real GPU's mapped memory is the device's, which takes no such advice.) */
+static void gpu_large_mapped_buffers_are_advised_huge_pages(void)
+{
+    vk_context *vk = gpu->vk;
+    if (vk->properties.deviceType != VK_PHYSICAL_DEVICE_TYPE_CPU) {
+        fprintf(stderr, "  not a CPU device: its mapped memory is the device's\n");
+        return;
+    }
+    vk_buffer b = { 0 };
+    const size_t size = 4 * CORE_HUGE_PAGE_MIN;
+    CHECK(vk_buffer_create(vk, size, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, VK_MEMORY_DEVICE, "huge page test", &b) ==
+          VKRT_OK);
+    CHECK_MSG(b.mapped != NULL, "lavapipe's device memory is not mapped");
+    if (b.mapped) {
+        int advised = mapping_advised_huge((unsigned char *)b.mapped + size / 2);
+        CHECK_MSG(advised == 1, "a %zu-byte mapped buffer: advised %d", size, advised);
+    }
+    vk_buffer_destroy(vk, &b);
+}
+
 /* The bit-exact comparisons of the tests above again, in a context whose shaders divide and
  * take square roots through the emulation that real GPUs run (rounding.glsl): on lavapipe,
  * whose own operators round correctly, it must change no bit of any image or hit. The shaders
@@ -1333,6 +1356,7 @@ int main(void)
     RUN(gpu_shared_layouts_match_c);
     RUN(gpu_ray_offset_matches_c);
     RUN(gpu_emulated_rounding_matches_c);
+    RUN(gpu_large_mapped_buffers_are_advised_huge_pages);
     RUN(gpu_every_pipeline_variant_runs);
     RUN(gpu_matches_cpu_reference);
     RUN(gpu_tiles_are_seamless);
