@@ -35,7 +35,7 @@ void core_free(core *c, void *pointer);
 /* Asks the system to back a block of at least CORE_HUGE_PAGE_MIN bytes with huge pages where it
  * can (Linux: transparent huge pages, a hint the kernel may ignore); smaller blocks are left
  * alone. core_alloc does it for every block it returns, and vk_buffer for the mapped memory of
- * a device that keeps its buffers in host memory (lavapipe). The library's large arrays (mesh
+ * a CPU device (lavapipe), whose buffers are ordinary host memory. The library's large arrays (mesh
  * arrays, BVH nodes and references, packed triangles, wide nodes, the device's copies of them)
  * are written soon after they are allocated and then read all over: with 4 KiB pages the first
  * touch of each costs a page fault (a quarter of the time of loading and building the full

@@ -131,8 +131,10 @@ vkrt_result vk_buffer_create(vk_context *vk, VkDeviceSize size, VkBufferUsageFla
             return vk_fail(vk, res, "vkMapMemory");
         }
         out->coherent = flags & VK_MEMORY_PROPERTY_HOST_COHERENT_BIT;
-        /* Before the first write: on lavapipe this is the memory the shaders read. */
-        core_advise_huge_pages(out->mapped, (size_t)req.size);
+        /* Before the first write. On a CPU device (lavapipe) this is ordinary host memory, the
+         * memory the shaders read; a GPU's mapped memory is the driver's, left as it is. */
+        if (vk->properties.deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU)
+            core_advise_huge_pages(out->mapped, (size_t)req.size);
     }
     return VKRT_OK;
 }
