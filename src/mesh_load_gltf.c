@@ -197,6 +197,54 @@ static bool accessor_aligned(const cgltf_accessor *a)
     return true;
 }
 
+/* n elements of `stride` bytes whose last takes `last` bytes, from `offset` into a range of
+ * `size` bytes, lie inside it; without overflow, whatever the file claims. */
+static bool elements_fit(cgltf_size size, cgltf_size offset, cgltf_size n, cgltf_size stride, cgltf_size last)
+{
+    if (offset > size) return false;
+    const cgltf_size room = size - offset;
+    if (n == 0) return true;
+    if (last > room) return false;
+    return stride == 0 || n - 1 <= (room - last) / stride;
+}
+
+/* Every buffer view inside its buffer and every accessor inside its buffer view, before
+ * cgltf_validate or anything else computes an address from them: cgltf 1.12 adds the offsets
+ * to the buffer's address unchecked, and its own checks add them up in size_t, where a
+ * negative byteOffset wraps (found by fuzz_gltf: a view at byteOffset -68 of length 72 passed
+ * them, and the index bound was read 68 bytes before the buffer). */
+static vkrt_result check_data_ranges(core *c, const char *path, const cgltf_data *data)
+{
+    for (cgltf_size i = 0; i < data->buffer_views_count; i++) {
+        const cgltf_buffer_view *v = &data->buffer_views[i];
+        bool inside = !v->buffer || elements_fit(v->buffer->size, v->offset, 1, 0, v->size);
+        if (v->has_meshopt_compression) {
+            const cgltf_meshopt_compression *mc = &v->meshopt_compression;
+            inside = inside && mc->buffer && elements_fit(mc->buffer->size, mc->offset, 1, 0, mc->size);
+        }
+        if (!inside)
+            return core_fail(c, VKRT_ERROR_PARSE, "%s: buffer view %zu reaches past the end of its buffer", path,
+                             (size_t)i);
+    }
+    for (cgltf_size i = 0; i < data->accessors_count; i++) {
+        const cgltf_accessor *a = &data->accessors[i];
+        const cgltf_size element = cgltf_num_components(a->type) * component_bytes(a->component_type);
+        bool inside = !a->buffer_view || elements_fit(a->buffer_view->size, a->offset, a->count, a->stride, element);
+        if (a->is_sparse) {
+            const cgltf_accessor_sparse *sp = &a->sparse;
+            inside = inside && sp->indices_buffer_view && sp->values_buffer_view &&
+                     elements_fit(sp->indices_buffer_view->size, sp->indices_byte_offset, sp->count,
+                                  component_bytes(sp->indices_component_type),
+                                  component_bytes(sp->indices_component_type)) &&
+                     elements_fit(sp->values_buffer_view->size, sp->values_byte_offset, sp->count, element, element);
+        }
+        if (!inside)
+            return core_fail(c, VKRT_ERROR_PARSE, "%s: accessor %zu reaches past the end of its buffer view", path,
+                             (size_t)i);
+    }
+    return VKRT_OK;
+}
+
 /* What cgltf_validate itself reads through typed pointers (primitive indices and sparse
  * indices, for their bounds) must be aligned before it runs. */
 static vkrt_result check_validated_alignment(core *c, const char *path, const cgltf_data *data)
@@ -931,6 +979,7 @@ vkrt_result mesh_load_gltf(core *c, const char *path, mesh *m)
         r = buffers_failure(c, path, data, cr);
         goto done;
     }
+    if ((r = check_data_ranges(c, path, data)) != VKRT_OK) goto done;
     if ((r = check_validated_alignment(c, path, data)) != VKRT_OK) goto done;
     if ((cr = cgltf_validate(data)) != cgltf_result_success) {
         if ((r = find_bad_index(c, path, data)) != VKRT_OK) goto done;

@@ -35,6 +35,10 @@ static const struct {
      * decoding (third_party/stb_image_glue.c). This one is corrupt further on: a warning, and
      * the material keeps its factors. */
     { "empty_idat_png.gltf", VKRT_OK, 12, NULL },
+    /* Found by fuzz_gltf: the index buffer view at byteOffset -68 (length 72), which wraps in
+     * size_t: cgltf_validate's own range checks passed, and it read the index bound 68 bytes
+     * before the buffer (undefined behaviour). */
+    { "negative_view_offset.glb", VKRT_ERROR_PARSE, 0, "buffer view 0 reaches past the end of its buffer" },
 };
 
 static bool input_error(vkrt_result r)
