@@ -57,6 +57,9 @@ static void every_regression_input_loads_or_fails_cleanly(void)
     struct dirent *e;
     while (ctx && d && (e = readdir(d)) != NULL) {
         if (e->d_name[0] == '.') continue;
+        /* SOURCES.md says where the inputs come from. */
+        const size_t len = strlen(e->d_name);
+        if (len > 3 && strcmp(e->d_name + len - 3, ".md") == 0) continue;
         char path[1024];
         snprintf(path, sizeof path, "%s/%s", DIR_PATH, e->d_name);
         vkrt_scene *s = NULL;
