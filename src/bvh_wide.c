@@ -20,21 +20,33 @@ static double node_area(const vkrt_gpu_node *n)
     return 2.0 * (dx * dy + dy * dz + dz * dx);
 }
 
+/* What a slot may be opened for: its area, or -1 for a leaf (never opened). An interior
+ * slot's children are fetched ahead, as they are read next if it is opened or pushed. */
+static double opening_area(const bvh *b, const vkrt_gpu_node *n)
+{
+    if (n->tri_count != 0) return -1.0;
+    __builtin_prefetch(&b->nodes[n->left_first]);
+    return node_area(n);
+}
+
 /* The binary nodes that become the slots of one wide node: start with `node`'s children and
  * open the interior one of largest area (the first such in slot order on a tie, so the
- * result is deterministic) while a slot is free. Returns the slot count, 2 to 4. */
+ * result is deterministic) while a slot is free. Returns the slot count, 2 to 4. Each slot's
+ * area is computed once, when its node is read. */
 static uint32_t gather_slots(const bvh *b, uint32_t node, uint32_t slots[BVH4_WIDTH])
 {
     uint32_t n = 2;
+    double area[BVH4_WIDTH];
     slots[0] = b->nodes[node].left_first;
     slots[1] = slots[0] + 1;
+    area[0] = opening_area(b, &b->nodes[slots[0]]);
+    area[1] = opening_area(b, &b->nodes[slots[1]]);
     while (n < BVH4_WIDTH) {
         uint32_t open = BVH4_EMPTY;
         double largest = -1.0;
         for (uint32_t i = 0; i < n; i++) {
-            const vkrt_gpu_node *s = &b->nodes[slots[i]];
-            if (s->tri_count == 0 && node_area(s) > largest) {
-                largest = node_area(s);
+            if (area[i] > largest) {
+                largest = area[i];
                 open = i;
             }
         }
@@ -42,8 +54,11 @@ static uint32_t gather_slots(const bvh *b, uint32_t node, uint32_t slots[BVH4_WI
         /* Its children take its slot and the next one, so siblings stay side by side. */
         uint32_t left = b->nodes[slots[open]].left_first;
         memmove(&slots[open + 2], &slots[open + 1], (n - open - 1) * sizeof *slots);
+        memmove(&area[open + 2], &area[open + 1], (n - open - 1) * sizeof *area);
         slots[open] = left;
         slots[open + 1] = left + 1;
+        area[open] = opening_area(b, &b->nodes[left]);
+        area[open + 1] = opening_area(b, &b->nodes[left + 1]);
         n++;
     }
     return n;
@@ -71,9 +86,9 @@ vkrt_result bvh4_collapse(core *c, const bvh *b, bvh4 *out)
     if (!b || !b->nodes || b->node_count == 0)
         return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "bvh4_collapse: the binary BVH has no nodes");
     /* Every wide node stands for one binary interior node, so the interior count bounds them
-     * (a root leaf still needs its one node). */
-    uint32_t capacity = 1;
-    for (uint32_t i = 0; i < b->node_count; i++) capacity += b->nodes[i].tri_count == 0;
+     * (a root leaf still needs its one node). Every interior node has two children, so a tree
+     * of N nodes has (N - 1) / 2 of them: no pass over the whole array to count. */
+    uint32_t capacity = 1 + (b->node_count - 1) / 2;
     uint64_t bytes = (uint64_t)capacity * sizeof(bvh4_node) + NODE_ALIGN;
     if (bytes <= SIZE_MAX) out->allocation = core_alloc(c, (size_t)bytes);
     if (!out->allocation)
@@ -118,6 +133,9 @@ vkrt_result bvh4_collapse(core *c, const bvh *b, bvh4 *out)
             clear_node(&out->nodes[k]);
             w->child[i] = k;
             stack[sp].binary = slots[i], stack[sp].wide = k, stack[sp++].level = level + 1;
+            /* The last one pushed is popped next: the others' children arrive meanwhile. */
+            __builtin_prefetch(&b->nodes[s->left_first]);
+            __builtin_prefetch(&b->nodes[s->left_first + 1]);
         }
     }
     return VKRT_OK;
