@@ -323,7 +323,7 @@ vkrt_result vkrt_scene_create(vkrt_context *ctx, const vkrt_scene_desc *desc, vk
     }
     mesh_destroy(c, &m);
     if (ctx->vk) {
-        r = gpu_scene_upload(ctx->vk, &s->bvh, s->tris, &s->gpu);
+        r = gpu_scene_upload(ctx->vk, &s->bvh, s->tris, ctx->cpu_threads, &s->gpu);
         if (r != VKRT_OK) goto fail;
         /* The wide BVH is part of the GPU's acceleration structure, as the CPU backend's
          * collapse is of its own (both in build_ms). */

@@ -131,14 +131,14 @@ static vkrt_result create_wide_buffers(vk_context *vk, const wide_arrays *w, boo
  * AO rays. A scene whose wide arrays the device cannot allocate (each is one buffer, where the
  * binary arrays are in pieces) keeps to the binary BVH, with a warning, rather than failing,
  * as one beyond their limits does. */
-static vkrt_result upload_wide(vk_context *vk, const bvh *b, const vkrt_gpu_tri *tris, gpu_scene *out,
+static vkrt_result upload_wide(vk_context *vk, const bvh *b, const vkrt_gpu_tri *tris, uint32_t threads, gpu_scene *out,
                                uint64_t *out_unfit_bytes)
 {
     *out_unfit_bytes = 0;
     wide_arrays w = { 0 };
     vkrt_result r = VKRT_OK;
     const double t0 = core_now_ms();
-    if (!vk->no_wide_traversal) r = wide_pack(vk->core, b, tris, &w);
+    if (!vk->no_wide_traversal) r = wide_pack(vk->core, b, tris, threads, &w);
     out->wide_pack_ms = core_now_ms() - t0;
     if (r != VKRT_OK) return r;
     const uint64_t texel_limit = vk->properties.limits.maxTexelBufferElements;
@@ -159,7 +159,7 @@ static vkrt_result upload_wide(vk_context *vk, const bvh *b, const vkrt_gpu_tri 
     return r;
 }
 
-vkrt_result gpu_scene_upload(vk_context *vk, const bvh *b, const vkrt_gpu_tri *tris, gpu_scene *out)
+vkrt_result gpu_scene_upload(vk_context *vk, const bvh *b, const vkrt_gpu_tri *tris, uint32_t threads, gpu_scene *out)
 {
     memset(out, 0, sizeof *out);
     const uint32_t node_count = b->node_count, tri_count = b->tri_count;
@@ -214,7 +214,7 @@ vkrt_result gpu_scene_upload(vk_context *vk, const bvh *b, const vkrt_gpu_tri *t
                                   placeholders[i])) != VKRT_OK)
             goto fail;
     uint64_t unfit_bytes;
-    if ((r = upload_wide(vk, b, tris, out, &unfit_bytes)) != VKRT_OK) goto fail;
+    if ((r = upload_wide(vk, b, tris, threads, out, &unfit_bytes)) != VKRT_OK) goto fail;
     /* Without the wide arrays every traversal reads the binary ones. */
     if (!out->wide && (r = gpu_scene_upload_arrays(vk, out, b, tris, GPU_ARRAY_NODES | GPU_ARRAY_TRIS)) != VKRT_OK)
         goto fail;

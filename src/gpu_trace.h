@@ -50,8 +50,9 @@ typedef struct gpu_scene {
  * (gpu_scene_upload_arrays). Where the triangles exceed what one buffer may hold (the device's
  * maxStorageBufferRange and maxMemoryAllocationSize, or the smaller vk->scene_buffer_limit),
  * every storage array of the scene is split into pieces; on a device without
- * bufferDeviceAddress that fails with VKRT_ERROR_LIMIT, naming the array and the limit. */
-vkrt_result gpu_scene_upload(vk_context *vk, const bvh *b, const vkrt_gpu_tri *tris, gpu_scene *out);
+ * bufferDeviceAddress that fails with VKRT_ERROR_LIMIT, naming the array and the limit. The
+ * wide arrays are packed on the host on `threads` threads (the context's cpu_threads). */
+vkrt_result gpu_scene_upload(vk_context *vk, const bvh *b, const vkrt_gpu_tri *tris, uint32_t threads, gpu_scene *out);
 void gpu_scene_destroy(vk_context *vk, gpu_scene *s);
 
 /* The binary arrays a call reads (gpu_trace_render_arrays, gpu_trace_rays_arrays). */

@@ -105,7 +105,7 @@ typedef struct vkrt_context_desc {
                                         vkrt_devices_list() */
     uint32_t cpu_threads;            /* 0 (default): one per online core; the CPU backend's
                                         tracing threads, and on both backends the threads that
-                                        build a scene's BVH */
+                                        build a scene's BVH (and pack the GPU's wide BVH) */
     const char *pipeline_cache_path; /* NULL (default): no cache on disk; else read at creation
                                         and written back at destruction (copied) */
     uint64_t device_memory_limit;    /* 0 (default): the device's memory heaps; else the bytes of

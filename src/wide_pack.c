@@ -4,6 +4,7 @@
 #include <string.h>
 
 #include "bvh_wide.h"
+#include "work_pool.h"
 
 static uint32_t float_bits(float f)
 {
@@ -117,7 +118,49 @@ static void pack_triangle(const vkrt_gpu_tri *t, uint32_t *words)
     words[PRIM_WORD] = t->prim_id;
 }
 
-vkrt_result wide_pack(core *c, const bvh *b, const vkrt_gpu_tri *tris, wide_arrays *out)
+/* Nodes or triangles a work item packs: small enough to share among threads evenly, large
+ * enough that taking an item costs nothing beside it. */
+#define PACK_ITEM 4096
+
+typedef struct pack_job {
+    const bvh4 *w;
+    const vkrt_gpu_tri *tris;
+    uint32_t tri_count;
+    uint8_t *ends_leaf;            /* per triangle: 1 where a leaf ends */
+    wide_arrays *out;
+} pack_job;
+
+static uint32_t items_for(uint32_t count) { return count / PACK_ITEM + (count % PACK_ITEM != 0); }
+
+/* Packs nodes and notes where each of their leaves ends: every binary leaf is one slot of one
+ * wide node, so no two items write the same byte. A byte a triangle (under a megabyte for the
+ * full dragon) stays in cache, where marking the packed triangles themselves missed it for
+ * every leaf, a third of the nodes' time. */
+static void pack_nodes_item(void *job, uint32_t item)
+{
+    const pack_job *j = job;
+    const uint32_t count = j->w->node_count;
+    const uint32_t first = item * PACK_ITEM, end = count - first < PACK_ITEM ? count : first + PACK_ITEM;
+    for (uint32_t i = first; i < end; i++) {
+        const bvh4_node *n = &j->w->nodes[i];
+        pack_node(n, j->out->node_texels + (size_t)i * VKRT_WIDE_NODE_TEXELS * 4);
+        for (int s = 0; s < BVH4_WIDTH; s++)
+            if (n->child[s] != BVH4_EMPTY && n->count[s]) j->ends_leaf[n->child[s] + n->count[s] - 1] = 1;
+    }
+}
+
+static void pack_triangles_item(void *job, uint32_t item)
+{
+    const pack_job *j = job;
+    const uint32_t first = item * PACK_ITEM, end = j->tri_count - first < PACK_ITEM ? j->tri_count : first + PACK_ITEM;
+    for (uint32_t i = first; i < end; i++) {
+        uint32_t *words = j->out->tri_texels + (size_t)i * VKRT_WIDE_TRI_WORDS;
+        pack_triangle(&j->tris[i], words);
+        if (j->ends_leaf[i]) words[PRIM_WORD] |= VKRT_TRACE_TRI_LAST;
+    }
+}
+
+vkrt_result wide_pack(core *c, const bvh *b, const vkrt_gpu_tri *tris, uint32_t threads, wide_arrays *out)
 {
     memset(out, 0, sizeof *out);
     bvh4 w;
@@ -128,28 +171,27 @@ vkrt_result wide_pack(core *c, const bvh *b, const vkrt_gpu_tri *tris, wide_arra
     const uint64_t tri_texels = b->tri_count ? VKRT_WIDE_TRI_FIRST_TEXEL((uint64_t)b->tri_count - 1) + 3 : 0;
     out->node_texels = core_alloc_array(c, (size_t)w.node_count * VKRT_WIDE_NODE_TEXELS, 4 * sizeof(uint32_t));
     out->tri_texels = core_alloc_array(c, (size_t)tri_texels, 4 * sizeof(uint32_t));
-    const bool ok = out->node_texels && (out->tri_texels || !tri_texels);
+    uint8_t *ends_leaf = core_calloc_array(c, b->tri_count ? b->tri_count : 1, 1);
+    work_pool *pool = NULL;
+    bool ok = out->node_texels && (out->tri_texels || !tri_texels) && ends_leaf;
+    if (ok) ok = work_pool_create(c, threads, &pool) == VKRT_OK;
     if (ok) {
-        for (uint32_t i = 0; i < w.node_count; i++)
-            pack_node(&w.nodes[i], out->node_texels + (size_t)i * VKRT_WIDE_NODE_TEXELS * 4);
-        /* The words after the last triangle, up to its last texel, are zero. */
-        memset(out->tri_texels, 0, (size_t)tri_texels * 4 * sizeof(uint32_t));
-        for (uint32_t i = 0; i < b->tri_count; i++)
-            pack_triangle(&tris[i], out->tri_texels + (size_t)i * VKRT_WIDE_TRI_WORDS);
+        /* The triangles write every word up to the last one's; the rest of its last texel is
+         * zero. They carry the leaves' ends, so the nodes come first. */
+        const size_t words = (size_t)tri_texels * 4, written = (size_t)b->tri_count * VKRT_WIDE_TRI_WORDS;
+        if (words > written) memset(out->tri_texels + written, 0, (words - written) * sizeof(uint32_t));
+        pack_job j = { .w = &w, .tris = tris, .tri_count = b->tri_count, .ends_leaf = ends_leaf, .out = out };
+        work_pool_run(pool, items_for(w.node_count), pack_nodes_item, NULL, &j);
+        work_pool_run(pool, items_for(b->tri_count), pack_triangles_item, NULL, &j);
     }
+    work_pool_destroy(pool);
+    core_free(c, ends_leaf);
     const uint32_t node_count = w.node_count, depth = w.depth;
     bvh4_destroy(c, &w);
     if (!ok) {
         wide_arrays_destroy(c, out);
         return core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "out of memory packing the wide BVH of %u triangles",
                          b->tri_count);
-    }
-    /* Leaves partition the triangle array: mark where each ends. */
-    for (uint32_t i = 0; i < b->node_count; i++) {
-        const vkrt_gpu_node *n = &b->nodes[i];
-        if (n->tri_count)
-            out->tri_texels[(size_t)(n->left_first + n->tri_count - 1) * VKRT_WIDE_TRI_WORDS + PRIM_WORD] |=
-                VKRT_TRACE_TRI_LAST;
     }
     out->node_count = node_count;
     out->tri_count = b->tri_count;

@@ -24,8 +24,9 @@ typedef struct wide_arrays {
  * pushes (three per level at most) and prim_id must leave the VKRT_TRACE_TRI_LAST bit free. */
 bool wide_traversal_fits(uint32_t wide_depth, uint32_t tri_count);
 
-/* Fills *out from the binary BVH and its packed triangles (in BVH order). */
-vkrt_result wide_pack(core *c, const bvh *b, const vkrt_gpu_tri *tris, wide_arrays *out);
+/* Fills *out from the binary BVH and its packed triangles (in BVH order), the packing on
+ * `threads` threads (0 counts as 1). */
+vkrt_result wide_pack(core *c, const bvh *b, const vkrt_gpu_tri *tris, uint32_t threads, wide_arrays *out);
 void wide_arrays_destroy(core *c, wide_arrays *w);
 
 #endif
