@@ -13,6 +13,7 @@
 #include <string.h>
 
 #include "bvh.h"
+#include "bvh_build_sah.h"
 #include "bvh_wide.h"
 #include "check.h"
 #include "core.h"
@@ -887,6 +888,38 @@ static void bvh_sah_is_identical_on_any_thread_count(void)
     mesh_destroy(&c, &dragon);
 }
 
+/* A subtree of more than SAH_TASK_REFS references: the parallel build hands a node of the top
+ * levels to one thread as it is once bins cannot split it. 12,000 triangles whose centroids
+ * lie a denormal apart (no bin scale can separate them, so the median fallback splits them,
+ * inside that one subtree) beside 20,000 random ones far off: the same nodes and order on any
+ * thread count, a valid tree, and leaves of at most 4. */
+static void bvh_sah_parallel_builds_oversized_subtrees(void)
+{
+    core c;
+    core_init(&c, NULL, NULL, NULL);
+    const uint32_t cluster = 12000, spread = 20000;
+    mesh m = test_mesh_new(&c, cluster + spread);
+    for (uint32_t i = 0; i < cluster; i++) {
+        float x = (float)i * FLT_TRUE_MIN;
+        set_tri(&m, i, x, 0, 0, x, 1, 0, x, 0, 1);
+    }
+    for (uint32_t i = cluster; i < cluster + spread; i++) {
+        float x = 10 + frand(), y = 10 + frand(), z = 10 + frand();
+        set_tri(&m, i, x, y, z, x + 0.01f * frand(), y + 0.01f, z, x, y + 0.01f * frand(), z + 0.01f);
+    }
+    CHECK(cluster > SAH_TASK_REFS);
+    check_identical_on_thread_counts("oversized subtree", &c, &m, 4);
+    bvh out;
+    bvh_stats s;
+    if (build_checked(&c, "oversized subtree, 2 threads", &m, VKRT_BVH_BUILDER_BINNED_SAH, 4, 2, &out, &s) == VKRT_OK) {
+        check_leaf_limit("oversized subtree", &out, &m, 4);
+        /* The median splits reach below the cluster's node: it was built, not left a leaf. */
+        CHECK_MSG(s.leaves > cluster / 4, "%u leaves", (unsigned)s.leaves);
+        bvh_destroy(&c, &out);
+    }
+    test_mesh_free(&c, &m);
+}
+
 typedef struct warn_log {
     int warnings;
     bool named_threads;
@@ -1190,6 +1223,7 @@ int main(void)
     RUN(bvh_progress_false_cancels_without_leak);
     RUN(bvh_out_of_memory_at_every_allocation_without_leak);
     RUN(bvh_sah_is_identical_on_any_thread_count);
+    RUN(bvh_sah_parallel_builds_oversized_subtrees);
     RUN(bvh_sah_parallel_out_of_memory_and_cancel_without_leak);
     RUN(bvh_sah_parallel_top_levels_report_progress);
     RUN(bvh_sbvh_parallel_is_identical_and_fails_cleanly);
