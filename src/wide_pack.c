@@ -132,6 +132,13 @@ typedef struct pack_job {
 
 static uint32_t items_for(uint32_t count) { return count / PACK_ITEM + (count % PACK_ITEM != 0); }
 
+/* One past the last of the `count` elements that item `item` packs, from item * PACK_ITEM. */
+static uint32_t item_end(uint32_t item, uint32_t count)
+{
+    const uint32_t first = item * PACK_ITEM;
+    return count - first < PACK_ITEM ? count : first + PACK_ITEM;
+}
+
 /* Packs nodes and notes where each of their leaves ends: every binary leaf is one slot of one
  * wide node, so no two items write the same byte. A byte a triangle (under a megabyte for the
  * full dragon) stays in cache, where marking the packed triangles themselves missed it for
@@ -139,9 +146,7 @@ static uint32_t items_for(uint32_t count) { return count / PACK_ITEM + (count % 
 static void pack_nodes_item(void *job, uint32_t item)
 {
     const pack_job *j = job;
-    const uint32_t count = j->w->node_count;
-    const uint32_t first = item * PACK_ITEM, end = count - first < PACK_ITEM ? count : first + PACK_ITEM;
-    for (uint32_t i = first; i < end; i++) {
+    for (uint32_t i = item * PACK_ITEM, end = item_end(item, j->w->node_count); i < end; i++) {
         const bvh4_node *n = &j->w->nodes[i];
         pack_node(n, j->out->node_texels + (size_t)i * VKRT_WIDE_NODE_TEXELS * 4);
         for (int s = 0; s < BVH4_WIDTH; s++)
@@ -152,8 +157,7 @@ static void pack_nodes_item(void *job, uint32_t item)
 static void pack_triangles_item(void *job, uint32_t item)
 {
     const pack_job *j = job;
-    const uint32_t first = item * PACK_ITEM, end = j->tri_count - first < PACK_ITEM ? j->tri_count : first + PACK_ITEM;
-    for (uint32_t i = first; i < end; i++) {
+    for (uint32_t i = item * PACK_ITEM, end = item_end(item, j->tri_count); i < end; i++) {
         uint32_t *words = j->out->tri_texels + (size_t)i * VKRT_WIDE_TRI_WORDS;
         pack_triangle(&j->tris[i], words);
         if (j->ends_leaf[i]) words[PRIM_WORD] |= VKRT_TRACE_TRI_LAST;
