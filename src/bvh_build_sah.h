@@ -11,8 +11,9 @@
 #include "work_pool.h"
 
 /* Wald 2007 measured 16-32 bins within a few percent of a full sweep's tree quality. On the
- * full dragon 16 bins cost 0.7% more SAH (49.10 against 48.77) for 3% less build time, 8 bins
- * 2.3% more for 6%; 32 stay. */
+ * full dragon 16 bins for every node cost 0.7% more SAH (49.10 against 48.77) for 3% less
+ * build time, 8 bins 2.3% more for 6%; 32 stay for nodes of 336 references and more, and
+ * smaller nodes take fewer (sah_bins_for() in bvh_build_sah.c). */
 #define SAH_BINS 32
 #define SAH_DEFAULT_MAX_LEAF 4
 
@@ -67,7 +68,8 @@ static inline bool bvh_build_sah_goes_left(const sah_ref *r, const sah_grid *g, 
 
 /* The references of triangles [first, first + count) of m, and their bounds. */
 void bvh_build_sah_refs(const mesh *m, sah_ref *refs, uint32_t first, uint32_t count, bvh_build_bounds *bounds);
-/* The grid of a node with centroid bounds t->cmin, t->cmax; false when no axis can be binned. */
+/* The grid of a node with centroid bounds t->cmin, t->cmax, its bins as many as its count of
+ * references calls for (at most SAH_BINS); false when no axis can be binned. */
 bool bvh_build_sah_grid(const bvh_build_task *t, sah_grid *g);
 void bvh_build_sah_binning_empty(sah_binning *b);
 /* Empties the bins in use, cheaper than bvh_build_sah_binning_empty() for small nodes. */
