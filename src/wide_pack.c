@@ -1,6 +1,5 @@
 #include "wide_pack.h"
 
-#include <math.h>
 #include <string.h>
 
 #include "bvh_wide.h"
@@ -48,24 +47,38 @@ static void quantise_axis(const bvh4_node *n, int axis, uint32_t used, float *ou
     /* The smallest exponent whose 255 steps from lo reach hi (0: a flat axis, scale 0). */
     uint32_t e = 0;
     if (hi > lo) {
-        /* From the exponent of (hi - lo) / 255 (frexp), up while 255 steps fall short. */
-        int exponent;
-        frexp(((double)hi - lo) / 255.0, &exponent);
+        /* From the exponent of (hi - lo) / 255, as frexp() gives it (a positive double of at
+         * least 2^-149 / 255 is normal, so it is its biased exponent less 1022), up while 255
+         * steps fall short. */
+        const double d = ((double)hi - lo) / 255.0;
+        uint64_t bits;
+        memcpy(&bits, &d, sizeof bits);
+        const int exponent = (int)((bits >> 52) & 0x7FF) - 1022;
         e = exponent + 126 < 1 ? 1 : exponent + 126 > 254 ? 254 : (uint32_t)(exponent + 126);
         while (e > 1 && dequantise(lo, scale_of(e - 1), 255) >= hi) e--;
         while (e < 254 && dequantise(lo, scale_of(e), 255) < hi) e++;
     }
     const float scale = scale_of(e);
+    /* 1 / scale, a power of two too, so multiplying by it is dividing by scale, bit for bit. */
+    const double inverse = e ? 1.0 / (double)scale : 0.0;
     for (uint32_t s = 0; s < BVH4_WIDTH; s++) {
         q_lo[s] = q_hi[s] = 0;
         if (s >= used || e == 0) continue;
-        /* The step the division points to, then moved until its decoding is at or below the
-         * child's lower bound (at or above its upper one): the division's rounding and the
-         * decoding's are each a fraction of a step, so this takes a move or two. */
-        const double lo_steps = floor(((double)n->lo[axis][s] - lo) / scale);
-        const double hi_steps = ceil(((double)n->hi[axis][s] - lo) / scale);
-        uint32_t a = lo_steps <= 0.0 ? 0 : lo_steps >= 255.0 ? 255 : (uint32_t)lo_steps;
-        uint32_t b = hi_steps <= 0.0 ? 0 : hi_steps >= 255.0 ? 255 : (uint32_t)hi_steps;
+        /* The step the division points to (floor and ceil clamped to [0, 255], by conversion:
+         * the calls to libm's floor, ceil and frexp were a fifth of the nodes' packing), then
+         * moved until its decoding is at or below the child's lower bound (at or above its
+         * upper one): the division's rounding and the decoding's are each a fraction of a
+         * step, so this takes a move or two. */
+        const double lo_steps = ((double)n->lo[axis][s] - lo) * inverse;
+        const double hi_steps = ((double)n->hi[axis][s] - lo) * inverse;
+        uint32_t a = lo_steps >= 255.0 ? 255 : lo_steps > 0.0 ? (uint32_t)lo_steps : 0;
+        uint32_t b = 0;
+        if (hi_steps > 254.0) {
+            b = 255;
+        } else if (hi_steps > 0.0) {
+            b = (uint32_t)hi_steps;
+            b += (double)b < hi_steps;
+        }
         while (a > 0 && dequantise(lo, scale, a) > n->lo[axis][s]) a--;
         while (a < 255 && dequantise(lo, scale, a + 1) <= n->lo[axis][s]) a++;
         while (b < 255 && dequantise(lo, scale, b) < n->hi[axis][s]) b++;
