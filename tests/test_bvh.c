@@ -3,7 +3,8 @@
  * depth, max_leaf_size holds, cancellation and out-of-memory leave nothing behind; the SAH
  * builder's BVH is the same on any number of threads; and the same on every mesh of the shared
  * model set. Every tree built here is also collapsed 4-wide (bvh_wide.h) and checked against
- * itself. */
+ * itself, and the GPU's quantised wide nodes (wide_pack.h) decode to boxes that hold their
+ * children with not a step to spare. */
 #include <dirent.h>
 #include <float.h>
 #include <math.h>
@@ -19,6 +20,8 @@
 #include "core.h"
 #include "huge_pages.h"
 #include "mesh.h"
+#include "scene_pack.h"
+#include "wide_pack.h"
 
 static const vkrt_bvh_builder builders[] = { VKRT_BVH_BUILDER_MIDPOINT, VKRT_BVH_BUILDER_BINNED_SAH,
                                               VKRT_BVH_BUILDER_SPATIAL_SAH };
@@ -1084,6 +1087,90 @@ static void bvh4_collapse_fails_cleanly(void)
     CHECK_EQ_U64(k.allocs, k.frees);
 }
 
+/* Decodes every child box of the packed wide nodes of m's BVH as the shader does (origin +
+ * step * 2^(e - 127), float arithmetic) and checks the quantisation promised in wide_pack.c: the
+ * origin is the children's lowest bound, the exponent the smallest whose 255 steps reach their
+ * highest (0 for a flat axis), and each decoded box holds its child's float box (the wide
+ * traversal may cull nothing the binary one enters) with not a step to spare on any side. */
+static void check_wide_quantisation(const char *what, core *c, const mesh *m)
+{
+    bvh b;
+    if (bvh_build(c, m, NULL, &b) != VKRT_OK) {
+        CHECK_MSG(false, "%s: build failed (%s)", what, c->last_error);
+        return;
+    }
+    vkrt_gpu_tri *tris = core_alloc_array(c, b.tri_count, sizeof *tris);
+    bvh4 w = { 0 };
+    wide_arrays p = { 0 };
+    CHECK(tris != NULL);
+    if (tris) scene_pack_triangles(m, &b, tris);
+    if (tris && bvh4_collapse(c, &b, &w) == VKRT_OK && wide_pack(c, &b, tris, 2, &p) == VKRT_OK) {
+        CHECK_MSG(p.node_count == w.node_count, "%s: %u packed nodes for %u wide ones", what, p.node_count, w.node_count);
+        uint64_t outside = 0, spare = 0, frames = 0, slots = 0;
+        for (uint32_t i = 0; i < p.node_count && i < w.node_count; i++) {
+            const uint32_t *t = p.node_texels + (size_t)i * VKRT_WIDE_NODE_TEXELS * 4;
+            const bvh4_node *n = &w.nodes[i];
+            for (int a = 0; a < 3; a++) {
+                float origin, scale, scale_below;
+                memcpy(&origin, &t[a], sizeof origin);
+                const uint32_t e = (t[3] >> (8 * a)) & 0xFFu, bits = e << 23, below = (e - 1) << 23;
+                memcpy(&scale, &bits, sizeof scale);
+                memcpy(&scale_below, &below, sizeof scale_below);
+                float lo = INFINITY, hi = -INFINITY;
+                for (int s = 0; s < BVH4_WIDTH && n->child[s] != BVH4_EMPTY; s++) {
+                    lo = fminf(lo, n->lo[a][s]);
+                    hi = fmaxf(hi, n->hi[a][s]);
+                }
+                frames += origin != lo || (hi > lo ? e == 0 || origin + 255.0f * scale < hi ||
+                                                         (e > 1 && origin + 255.0f * scale_below >= hi)
+                                                   : e != 0);
+                for (int s = 0; s < BVH4_WIDTH && n->child[s] != BVH4_EMPTY; s++) {
+                    const uint32_t q_lo = (t[4 + a] >> (8 * s)) & 0xFFu, q_hi = (t[7 + a] >> (8 * s)) & 0xFFu;
+                    const float d_lo = origin + (float)q_lo * scale, d_hi = origin + (float)q_hi * scale;
+                    outside += !(d_lo <= n->lo[a][s] && d_hi >= n->hi[a][s]);
+                    if (e != 0)
+                        spare += (q_lo < 255 && origin + (float)(q_lo + 1) * scale <= n->lo[a][s]) ||
+                                 (q_hi > 0 && origin + (float)(q_hi - 1) * scale >= n->hi[a][s]);
+                    slots++;
+                }
+            }
+        }
+        fprintf(stderr, "  %s: %u wide nodes, %llu slot axes decoded\n", what, p.node_count, (unsigned long long)slots);
+        CHECK_MSG(slots > 0, "%s: no slots decoded", what);
+        CHECK_MSG(frames == 0, "%s: %llu node axes with the wrong origin or exponent", what, (unsigned long long)frames);
+        CHECK_MSG(outside == 0, "%s: %llu decoded bounds inside the child's box", what, (unsigned long long)outside);
+        CHECK_MSG(spare == 0, "%s: %llu decoded bounds a step or more loose", what, (unsigned long long)spare);
+    } else {
+        CHECK_MSG(false, "%s: collapse or packing failed (%s)", what, c->last_error);
+    }
+    wide_arrays_destroy(c, &p);
+    bvh4_destroy(c, &w);
+    core_free(c, tris);
+    bvh_destroy(c, &b);
+}
+
+static void wide_pack_quantises_conservatively_and_tightly(void)
+{
+    core c;
+    core_init(&c, NULL, NULL, NULL);
+    mesh m = make_random(&c, 3000);
+    check_wide_quantisation("random 3000", &c, &m);
+    test_mesh_free(&c, &m);
+    /* Flat axes (z = 0 throughout) and far-from-zero origins with small steps: x near 3e5,
+     * where a float's spacing (2^-5) is within a few steps of the children's extents. */
+    m = test_mesh_new(&c, 2 * 40 * 40);
+    uint32_t t = 0;
+    for (int y = 0; y < 40; y++)
+        for (int x = 0; x < 40; x++) {
+            float x0 = 300000.0f + 0.25f * (float)x, y0 = 1e-3f * (float)y, x1 = x0 + 0.25f, y1 = y0 + 1e-3f;
+            set_tri(&m, t++, x0, y0, 0, x1, y0, 0, x1, y1, 0);
+            set_tri(&m, t++, x0, y0, 0, x1, y1, 0, x0, y1, 0);
+        }
+    update_bounds(&m);
+    check_wide_quantisation("flat grid far from 0", &c, &m);
+    test_mesh_free(&c, &m);
+}
+
 static void bvh_validate_reports_broken_trees(void)
 {
     core c;
@@ -1230,6 +1317,7 @@ int main(void)
     RUN(bvh_sbvh_parallel_is_identical_and_fails_cleanly);
     RUN(bvh_sah_builds_the_same_tree_when_threads_fail_to_start);
     RUN(bvh4_collapse_fails_cleanly);
+    RUN(wide_pack_quantises_conservatively_and_tightly);
     RUN(bvh_validate_reports_broken_trees);
     RUN(bvh_shared_models_are_valid_and_sah_is_cheaper);
     return check_exit();
