@@ -3,8 +3,8 @@
  * This implements I. Wald, "On fast Construction of SAH-based Bounding Volume Hierarchies",
  * IEEE Symposium on Interactive Ray Tracing 2007: instead of sorting triangles along each
  * axis, every node bins the centres of its triangles' boxes into equal intervals (SAH_BINS,
- * fewer for small nodes) of the centroid bounds on each of the three axes, accumulating a box and a count per bin; a
- * sweep over the bin boundaries then gives the surface area heuristic
+ * fewer for small nodes) of the centroid bounds on each of the three axes, accumulating a box
+ * and a count per bin; a sweep over the bin boundaries then gives the surface area heuristic
  * (MacDonald and Booth 1990, "Heuristics for ray tracing using space subdivision")
  *
  *     cost(split) = C_trav * A(node) + C_isect * (A(left) N(left) + A(right) N(right))
@@ -29,10 +29,11 @@
  * Speed (the build is on the critical path of every scene): one pass over a node's references
  * bins all three axes, with 4-lane box updates (float4.h); sweeps, resets and child boxes
  * visit only the bins that hold references (a bit mask per axis), which matters because most
- * nodes hold a handful, and small nodes have fewer bins to fill; the partition is branch-free; each node's child boxes come from its
- * bins, its children's centroid bounds from one pass after the partition, and no node
- * allocates. Large meshes are built by several threads (bvh_build_sah_parallel.c); this file
- * holds the split rule and the serial subtree loop they share.
+ * nodes hold a handful, and small nodes have fewer bins to fill; the partition is
+ * branch-free; each node's child boxes come from its bins, its children's centroid bounds from
+ * one pass after the partition, and no node allocates. Large meshes are built by several
+ * threads (bvh_build_sah_parallel.c); this file holds the split rule and the serial subtree
+ * loop they share.
  *
  * Memory: one array of triangle references (box + index, 32 bytes each) that is partitioned
  * in place, and the node array at its upper bound of 2N - 1, shrunk to size at the end. The
