@@ -286,10 +286,13 @@ static vkrt_result write_csv(const compare *c, const char *path)
     return bench_csv_end(&csv);
 }
 
-static int by_value(const void *pa, const void *pb)
+/* Engine e's scene (a vkrt backend) made from the run's source; *out stays NULL where the GPU
+ * scene is beyond the device, skipped (skipped_size bytes) then says why. */
+static vkrt_result create_scene(compare *c, engine e, vkrt_scene **out, char *skipped, size_t skipped_size)
 {
-    double a = *(const double *)pa, b = *(const double *)pb;
-    return a < b ? -1 : a > b;
+    vkrt_scene_desc d = bench_scene_desc(&c->source);
+    return bench_scene_create(e == ENGINE_VKRT_CPU ? c->cpu : c->gpu, e == ENGINE_VKRT_GPU ? BENCH_GPU_BACKEND_ROWS : NULL,
+                              &d, out, skipped, skipped_size, c->report->error, sizeof c->report->error);
 }
 
 /* The builds timed again until each engine has c->repeat of them, the engines taking turns
@@ -323,12 +326,9 @@ static vkrt_result time_builds(compare *c, const float *triangles, size_t tri_co
                 bench_embree_destroy(again);
                 continue;
             }
-            vkrt_context *ctx = e == ENGINE_VKRT_CPU ? c->cpu : c->gpu;
-            vkrt_scene_desc d = bench_scene_desc(&c->source);
             vkrt_scene *again = NULL;
             char skipped[sizeof c->gpu_skipped];
-            r = bench_scene_create(ctx, e == ENGINE_VKRT_GPU ? BENCH_GPU_BACKEND_ROWS : NULL, &d, &again, skipped,
-                                   sizeof skipped, c->report->error, sizeof c->report->error);
+            r = create_scene(c, e, &again, skipped, sizeof skipped);
             vkrt_scene_stats st = { 0 };
             if (r == VKRT_OK && !again) {
                 /* The device had room for one GPU scene, not two: keep the first build's time. */
@@ -342,9 +342,7 @@ static vkrt_result time_builds(compare *c, const float *triangles, size_t tri_co
     }
     for (engine e = 0; r == VKRT_OK && e < ENGINE_COUNT; e++) {
         if (!timed[e]) continue;
-        double *v = &ms[(size_t)e * c->repeat];
-        qsort(v, c->repeat, sizeof *v, by_value);
-        const double median = c->repeat % 2 ? v[c->repeat / 2] : 0.5 * (v[c->repeat / 2 - 1] + v[c->repeat / 2]);
+        const double median = bench_median(&ms[(size_t)e * c->repeat], c->repeat);
         if (e == ENGINE_EMBREE) c->embree_build_ms = median;
         else c->stats[e].build_ms = median;
     }
@@ -359,10 +357,7 @@ static vkrt_result load(compare *c)
     for (engine e = ENGINE_VKRT_CPU; e <= ENGINE_VKRT_GPU; e++) {
         vkrt_context *ctx = e == ENGINE_VKRT_CPU ? c->cpu : c->gpu;
         if (!ctx) continue;
-        vkrt_scene_desc d = bench_scene_desc(&c->source);
-        vkrt_result r = bench_scene_create(ctx, e == ENGINE_VKRT_GPU ? BENCH_GPU_BACKEND_ROWS : NULL, &d, &c->scene[e],
-                                           c->gpu_skipped, sizeof c->gpu_skipped, c->report->error,
-                                           sizeof c->report->error);
+        vkrt_result r = create_scene(c, e, &c->scene[e], c->gpu_skipped, sizeof c->gpu_skipped);
         if (r != VKRT_OK) return r;
         if (c->scene[e]) vkrt_scene_stats_get(c->scene[e], &c->stats[e]);
     }

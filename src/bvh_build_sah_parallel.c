@@ -111,8 +111,6 @@ typedef struct sah_job {
     _Atomic uint64_t placed;       /* triangles in the leaves of finished subtrees */
 } sah_job;
 
-static uint32_t div_up(uint32_t a, uint32_t b) { return a / b + (a % b != 0); }
-
 /* ---- setup: references and root bounds ------------------------------------------------ */
 
 static void setup_chunk(void *job, uint32_t i)
@@ -318,7 +316,7 @@ static bool build_top(sah_job *j, const bvh_build_task *root)
                 continue;
             }
             t->chunk0 = j->chunk_count;
-            t->chunks = div_up(t->task.count, SAH_CHUNK_REFS);
+            t->chunks = core_div_up(t->task.count, SAH_CHUNK_REFS);
             for (uint32_t c = 0; c < t->chunks; c++) {
                 uint32_t first = c * SAH_CHUNK_REFS, n_left = t->task.count - first;
                 j->chunks[j->chunk_count++] = (sah_chunk){ .node = n, .first = t->task.first + first,
@@ -520,7 +518,7 @@ vkrt_result bvh_build_sah_parallel(bvh_build_state *b, const mesh *m, uint32_t m
     if (!j.level || !j.next || !j.chunks || !j.chunk_bins || !j.misplaced[0] || !j.misplaced[1] || !j.trades)
         goto out_of_memory;
 
-    uint32_t setup_chunks = div_up(n, SAH_CHUNK_REFS);
+    uint32_t setup_chunks = core_div_up(n, SAH_CHUNK_REFS);
     work_pool_run(j.pool, setup_chunks, setup_chunk, NULL, &j);
     bvh_build_bounds root;
     bvh_build_bounds_empty(&root);

@@ -64,4 +64,7 @@ void core_clear_error(core *c);
 /* Monotonic wall clock in milliseconds. */
 double core_now_ms(void);
 
+/* a / b rounded up (b > 0), without the overflow of (a + b - 1) / b. */
+static inline uint32_t core_div_up(uint32_t a, uint32_t b) { return a / b + (a % b != 0); }
+
 #endif

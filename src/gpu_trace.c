@@ -568,18 +568,13 @@ static bool wide_traversal(const gpu_scene *scene, bool naive)
     return scene->wide && !naive;
 }
 
-static uint32_t div_up(uint32_t a, uint32_t b)
-{
-    return (a + b - 1) / b;
-}
-
 /* The 1D workgroups of a dispatch over `rays` rays of a ray buffer: one invocation a ray, or
  * with the wide traversal one per VKRT_WIDE_RAYS_PER_LANE rays; VKRT_RAY_CHUNK keeps the
  * count far below the 65,535 a dispatch allows. */
 static uint32_t ray_groups(const gpu_scene *scene, bool naive, uint32_t rays)
 {
     const uint32_t per_invocation = wide_traversal(scene, naive) ? VKRT_WIDE_RAYS_PER_LANE : 1;
-    return div_up(rays, VKRT_TRACE_GROUP_SIZE * per_invocation);
+    return core_div_up(rays, VKRT_TRACE_GROUP_SIZE * per_invocation);
 }
 
 /* The continuation slots a budgeted pass over `rays` rays needs: one an invocation (the
@@ -768,8 +763,8 @@ static void record_tile(VkCommandBuffer cmd, const vk_trace_pipeline *pipe, cons
                         pass_range range)
 {
     VkImageMemoryBarrier to_general = record_image_to_general(cmd, o, first_use && !range.again, range.again);
-    record_dispatches(cmd, pipe, o, scene, push, naive, budget, range, div_up(push.tile_width, VKRT_TRACE_GROUP_X),
-                      div_up(push.tile_height, VKRT_TRACE_GROUP_Y));
+    record_dispatches(cmd, pipe, o, scene, push, naive, budget, range,
+                      core_div_up(push.tile_width, VKRT_TRACE_GROUP_X), core_div_up(push.tile_height, VKRT_TRACE_GROUP_Y));
     /* The copy reads what the shader wrote. */
     VkImageMemoryBarrier to_transfer = to_general;
     to_transfer.srcAccessMask = VK_ACCESS_SHADER_WRITE_BIT;
@@ -868,7 +863,7 @@ static vkrt_result run_passes(vk_context *vk, render_objects *o, const pass_desc
             if (chunks < 1) chunks = 1;
             const uint64_t end = range.tri_first + chunks * VKRT_NAIVE_CHUNK_TRIS;
             range.tri_end = end < tri_count ? (uint32_t)end : tri_count;
-            chunks = div_up(range.tri_end - range.tri_first, VKRT_NAIVE_CHUNK_TRIS);
+            chunks = core_div_up(range.tri_end - range.tri_first, VKRT_NAIVE_CHUNK_TRIS);
         }
         VkCommandBuffer cmd;
         vkrt_result r = vk_commands_begin(vk, &cmd);
@@ -900,7 +895,7 @@ static vkrt_result run_passes(vk_context *vk, render_objects *o, const pass_desc
 
 static uint32_t naive_chunks(const gpu_scene *scene)
 {
-    return div_up(scene->tri_count, VKRT_NAIVE_CHUNK_TRIS);
+    return core_div_up(scene->tri_count, VKRT_NAIVE_CHUNK_TRIS);
 }
 
 /* A pacer for a render or a trace: its units are pixels or rays times naive chunks, from one
@@ -994,7 +989,7 @@ vkrt_result gpu_trace_render(vk_context *vk, const gpu_scene *scene, const gpu_t
                               budget ? tile_w * tile_h : 0, variant.counters ? tile_w * tile_h : 0, &o);
     gpu_pacer pacer;
     pacer_for(vk, scene, naive, (uint64_t)tile_w * tile_h, &pacer);
-    const uint32_t tiles_x = div_up(width, tile_w), tiles_y = div_up(height, tile_h);
+    const uint32_t tiles_x = core_div_up(width, tile_w), tiles_y = core_div_up(height, tile_h);
     const uint32_t tiles = tiles_x * tiles_y;
     const double pixels = (double)width * height;
     uint64_t done = 0;

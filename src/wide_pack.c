@@ -143,8 +143,6 @@ typedef struct pack_job {
     wide_arrays *out;
 } pack_job;
 
-static uint32_t items_for(uint32_t count) { return count / PACK_ITEM + (count % PACK_ITEM != 0); }
-
 /* One past the last of the `count` elements that item `item` packs, from item * PACK_ITEM. */
 static uint32_t item_end(uint32_t item, uint32_t count)
 {
@@ -198,8 +196,8 @@ vkrt_result wide_pack(core *c, const bvh *b, const vkrt_gpu_tri *tris, uint32_t 
         const size_t words = (size_t)tri_texels * 4, written = (size_t)b->tri_count * VKRT_WIDE_TRI_WORDS;
         if (words > written) memset(out->tri_texels + written, 0, (words - written) * sizeof(uint32_t));
         pack_job j = { .w = &w, .tris = tris, .tri_count = b->tri_count, .ends_leaf = ends_leaf, .out = out };
-        work_pool_run(pool, items_for(w.node_count), pack_nodes_item, NULL, &j);
-        work_pool_run(pool, items_for(b->tri_count), pack_triangles_item, NULL, &j);
+        work_pool_run(pool, core_div_up(w.node_count, PACK_ITEM), pack_nodes_item, NULL, &j);
+        work_pool_run(pool, core_div_up(b->tri_count, PACK_ITEM), pack_triangles_item, NULL, &j);
     }
     work_pool_destroy(pool);
     core_free(c, ends_leaf);

@@ -1,7 +1,8 @@
 /* A fixed set of worker threads that run the numbered items of one job at a time, the calling
  * thread among them; used by the BVH builder, the GPU scene's wide packing and the CPU
  * tracer. The calling thread alone calls the job's `between` hook (for progress reports and
- * cancellation), so user callbacks never run on a worker. Internal; the pool itself makes no allocation after creation. */
+ * cancellation), so user callbacks never run on a worker. Internal; the pool itself makes no
+ * allocation after creation. */
 #ifndef VKRT_WORK_POOL_H
 #define VKRT_WORK_POOL_H
 
