@@ -137,6 +137,13 @@ unsigned cpu_trace_watertight4_test(const vkrt_gpu_ray *ray, const vkrt_gpu_tri 
     return mask;
 }
 
+bool cpu_trace_ray_enters_box(const vkrt_ray *ray, const vkrt_gpu_node *box)
+{
+    ray_f r;
+    float tnear;
+    return ray_from_buffer_f(ray, &r) && intersect_box_f(&r, box, r.tmax, &tnear);
+}
+
 vkrt_gpu_ray cpu_trace_camera_ray(const vkrt_gpu_push *camera, uint32_t x, uint32_t y)
 {
     camera_f cam = { v_load_f(camera->eye), v_load_f(camera->right), v_load_f(camera->up), v_load_f(camera->forward),

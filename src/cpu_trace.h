@@ -65,6 +65,11 @@ typedef struct cpu_trace_rays_params {
 vkrt_result cpu_trace_rays(core *c, const cpu_trace_scene *scene, const cpu_trace_rays_params *params,
                            const vkrt_ray *rays, size_t count, vkrt_hit *out_hits);
 
+/* Whether the reference's first step enters box for this ray: the float ray of a ray buffer
+ * (false for one that must miss), box-tested against its tmax. What ray_cull_test4 is held
+ * to by test_cpu_trace. */
+bool cpu_trace_ray_enters_box(const vkrt_ray *ray, const vkrt_gpu_node *box);
+
 /* The primary ray of pixel (x, y) in float, as shaders/trace_common.glsl's camera_ray makes it
  * (tmax = 0: infinity). */
 vkrt_gpu_ray cpu_trace_camera_ray(const vkrt_gpu_push *camera, uint32_t x, uint32_t y);

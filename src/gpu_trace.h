@@ -42,6 +42,8 @@ typedef struct gpu_scene {
     double wide_pack_ms;       /* the host's collapse and packing of those arrays */
     uint32_t node_count;
     uint32_t tri_count;
+    vkrt_gpu_node root;        /* the binary BVH's root, whose box gpu_trace_rays culls rays
+                                  with (ray_cull.h); unused where node_count is 0 */
 } gpu_scene;
 
 /* Uploads the wide BVH and its triangles' corners as texel buffers where the wide traversal

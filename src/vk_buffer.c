@@ -154,7 +154,7 @@ void vk_buffer_destroy(vk_context *vk, vk_buffer *b)
     memset(b, 0, sizeof *b);
 }
 
-static vkrt_result flush(vk_context *vk, vk_buffer *b)
+vkrt_result vk_buffer_flush(vk_context *vk, vk_buffer *b)
 {
     if (b->coherent) return VKRT_OK;
     VkMappedMemoryRange range = { .sType = VK_STRUCTURE_TYPE_MAPPED_MEMORY_RANGE, .memory = b->memory, .size = VK_WHOLE_SIZE };
@@ -174,13 +174,13 @@ vkrt_result vk_buffer_upload(vk_context *vk, vk_buffer *dst, const void *data, V
 {
     if (dst->mapped) {
         memcpy(dst->mapped, data, (size_t)size);
-        return flush(vk, dst);
+        return vk_buffer_flush(vk, dst);
     }
     vk_buffer staging;
     vkrt_result r = vk_buffer_create(vk, size, VK_BUFFER_USAGE_TRANSFER_SRC_BIT, VK_MEMORY_READBACK, "vkrt staging", &staging);
     if (r != VKRT_OK) return r;
     memcpy(staging.mapped, data, (size_t)size);
-    if ((r = flush(vk, &staging)) == VKRT_OK) {
+    if ((r = vk_buffer_flush(vk, &staging)) == VKRT_OK) {
         VkCommandBuffer cmd;
         if ((r = vk_commands_begin(vk, &cmd)) == VKRT_OK) {
             VkBufferCopy region = { .size = size };

@@ -46,6 +46,8 @@ void vk_texel_buffer_destroy(vk_context *vk, vk_texel_buffer *t);
 
 /* Fills a device buffer: a memcpy when it is mapped, else through a staging buffer. */
 vkrt_result vk_buffer_upload(vk_context *vk, vk_buffer *dst, const void *data, VkDeviceSize size);
+/* Makes host writes through b->mapped visible to the device. */
+vkrt_result vk_buffer_flush(vk_context *vk, vk_buffer *b);
 /* Makes device writes visible to the host before reading b->mapped. */
 vkrt_result vk_buffer_invalidate(vk_context *vk, vk_buffer *b);
 

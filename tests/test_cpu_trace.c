@@ -19,6 +19,7 @@
 #include "core.h"
 #include "cpu_trace.h"
 #include "mesh.h"
+#include "ray_cull.h"
 #include "scene_pack.h"
 #include "texture.h"
 #include "trace_fixtures.h"
@@ -1079,6 +1080,136 @@ static void bvh4_box_test_simd_equals_binary_box_test_on_hostile_inputs(void)
     CHECK(hits > tests / 10);
 }
 
+/* vkrt_trace_rays' cull on the host (ray_cull.h) answers as the reference's first step does,
+ * the root box test of a ray from the buffer, on the inputs where that test has its special
+ * cases: origins on the box's planes and corners, +-0, denormal, huge and infinite direction
+ * components, NaN and infinite origins, tmin and tmax of every kind (tmax 0 meaning infinity,
+ * NaN, below tmin), flat and inverted boxes. A ray culled that the reference enters would lose
+ * its hits; one kept that it does not enter would cost the device a traversal. */
+static void ray_cull_test4_equals_the_reference_root_test_on_hostile_rays(void)
+{
+    const float comps[] = { 0.0f, -0.0f, 1.0f, -1.0f, 0.5f, -0.25f, 1e-40f, -1e-40f, 3e38f, -3e38f, 1e-20f, INFINITY, NAN };
+    const float coords[] = { 0.0f, -0.0f, 1.0f, -1.0f, 0.5f, 2.0f, -3.0f, INFINITY, -INFINITY, FLT_MAX, -FLT_MAX, 1e-30f, NAN };
+    const float spans[] = { 0.0f, -0.0f, 1e-3f, 0.75f, 4.0f, -1.0f, 1e30f, INFINITY, NAN };
+    const size_t nc = sizeof comps / sizeof comps[0], nx = sizeof coords / sizeof coords[0];
+    const size_t ns = sizeof spans / sizeof spans[0];
+    test_rng rng = { 77 };
+    size_t tests = 0, entered = 0, differ = 0;
+    for (int iter = 0; iter < 100000; iter++) {
+        vkrt_gpu_node box = { 0 };
+        const double kind = rng_uniform(&rng);
+        float lo[3], hi[3];
+        for (int a = 0; a < 3; a++) {
+            lo[a] = coords[(size_t)(rng_uniform(&rng) * 7)], hi[a] = coords[(size_t)(rng_uniform(&rng) * 7)];
+            if (kind < 0.7 && lo[a] > hi[a]) {
+                float t = lo[a];
+                lo[a] = hi[a], hi[a] = t;
+            } else if (kind < 0.8) {
+                hi[a] = lo[a]; /* flat */
+            }
+        }
+        box.bmin = (vkrt_float3){ lo[0], lo[1], lo[2] };
+        box.bmax = (vkrt_float3){ hi[0], hi[1], hi[2] };
+        vkrt_ray rays[4];
+        for (int l = 0; l < 4; l++) {
+            float o[3], d[3];
+            for (int a = 0; a < 3; a++) {
+                const double u = rng_uniform(&rng);
+                /* On the box's planes, on the grid, anywhere, or not a number at all. */
+                o[a] = u < 0.3 ? (rng_uniform(&rng) < 0.5 ? lo[a] : hi[a])
+                       : u < 0.6 ? coords[(size_t)(rng_uniform(&rng) * nx)]
+                                 : (float)(6.0 * rng_uniform(&rng) - 3.0);
+                /* Towards the box's middle (through it, where the middle is finite), a special
+                 * component, or anywhere. */
+                const double v = rng_uniform(&rng);
+                d[a] = v < 0.5   ? 0.5f * lo[a] + 0.5f * hi[a] - o[a]
+                       : v < 0.75 ? comps[(size_t)(rng_uniform(&rng) * nc)]
+                                  : (float)(2.0 * rng_uniform(&rng) - 1.0);
+            }
+            rays[l] = (vkrt_ray){ .origin = { o[0], o[1], o[2] }, .dir = { d[0], d[1], d[2] },
+                                  .tmin = rng_uniform(&rng) < 0.5 ? 0.0f : spans[(size_t)(rng_uniform(&rng) * ns)],
+                                  .tmax = rng_uniform(&rng) < 0.3 ? 0.0f : spans[(size_t)(rng_uniform(&rng) * ns)] };
+        }
+        unsigned mask = ray_cull_test4(rays, &box), ref = 0;
+        for (unsigned l = 0; l < 4; l++) ref |= (unsigned)cpu_trace_ray_enters_box(&rays[l], &box) << l;
+        if (mask != ref && differ++ < 3)
+            fprintf(stderr, "  differ: box (%g %g %g)-(%g %g %g): masks %x %x\n", lo[0], lo[1], lo[2], hi[0], hi[1],
+                    hi[2], mask, ref);
+        tests += 4;
+        entered += (size_t)__builtin_popcount(ref);
+    }
+    fprintf(stderr, "  %zu rays, %zu enter the box, %zu groups of four differ\n", tests, entered, differ);
+    CHECK_EQ_U64(differ, 0);
+    CHECK(entered > tests / 10 && entered < tests - tests / 10);
+}
+
+/* ray_cull_compact keeps the rays that may enter the box in their order with their positions,
+ * writes a miss for each ray it read and culled and nothing past what it read, and stops at
+ * the first ray it has no room for, so that the next chunk starts there. */
+static void ray_cull_compact_keeps_order_and_stops_where_the_room_ends(void)
+{
+    const vkrt_gpu_node box = { .bmin = { -0.5f, -0.5f, -0.5f }, .bmax = { 0.5f, 0.5f, 0.5f } };
+    enum { N = 103 }; /* not a multiple of four: the last group is short */
+    vkrt_ray rays[N];
+    bool enters[N];
+    size_t entering = 0;
+    for (size_t i = 0; i < N; i++) {
+        /* From z = 2 towards -z at x = 0.2 * (i % 13 - 6): through the box for |x| <= 0.5. */
+        const float x = 0.2f * (float)((int)(i % 13) - 6);
+        rays[i] = (vkrt_ray){ .origin = { x, 0.0f, 2.0f }, .dir = { 0.0f, 0.0f, -1.0f } };
+        if (i % 17 == 5) rays[i].origin[1] = NAN; /* must miss */
+        enters[i] = cpu_trace_ray_enters_box(&rays[i], &box);
+        entering += enters[i];
+    }
+    CHECK(entering > N / 3 && entering < N - N / 4);
+    const vkrt_hit untouched = { .t = 42.0f, .prim_id = 7, .u = 0.25f, .v = 0.5f };
+    for (size_t room = 1; room <= N + 1; room += 6) {
+        vkrt_ray out[N];
+        uint32_t index[N];
+        vkrt_hit hits[N];
+        for (size_t i = 0; i < N; i++) hits[i] = untouched;
+        size_t read = 0, first = 0, chunks = 0, total = 0;
+        bool order_ok = true, hits_ok = true;
+        /* Chunk after chunk, as gpu_trace_rays reads them. */
+        while (first < N) {
+            size_t copied = ray_cull_compact(rays + first, N - first, &box, room, out, index, hits + first, &read);
+            CHECK(copied <= room && read > 0);
+            for (size_t k = 0; k < copied; k++) {
+                size_t i = first + index[k];
+                order_ok = order_ok && i < first + read && enters[i] && memcmp(&out[k], &rays[i], sizeof out[k]) == 0 &&
+                           (k == 0 || index[k] > index[k - 1]);
+            }
+            /* The read rays that enter are exactly the copied ones, and the read ones that do
+             * not hold misses; a chunk that stopped for room stopped at an entering ray. */
+            size_t entering_read = 0;
+            for (size_t i = first; i < first + read; i++) {
+                entering_read += enters[i];
+                hits_ok = hits_ok && (enters[i] ? memcmp(&hits[i], &untouched, sizeof untouched) == 0
+                                                : hits[i].t == -1.0f && hits[i].prim_id == VKRT_NO_HIT &&
+                                                      hits[i].u == 0.0f && hits[i].v == 0.0f);
+            }
+            CHECK_EQ_U64(entering_read, copied);
+            if (first + read < N) CHECK(copied == room && enters[first + read]);
+            for (size_t i = first + read; i < N; i++) hits_ok = hits_ok && memcmp(&hits[i], &untouched, sizeof untouched) == 0;
+            total += copied;
+            first += read;
+            chunks++;
+        }
+        CHECK_MSG(order_ok, "room %zu: copied rays out of order or wrong", room);
+        CHECK_MSG(hits_ok, "room %zu: misses written wrong", room);
+        CHECK_EQ_U64(total, entering);
+        CHECK(chunks <= entering / room + 1);
+    }
+    /* An empty scene: nothing to enter, every ray a miss. */
+    vkrt_ray out[N];
+    uint32_t index[N];
+    vkrt_hit hits[N];
+    size_t read = 0;
+    CHECK_EQ_U64(ray_cull_compact(rays, N, NULL, N, out, index, hits, &read), 0);
+    CHECK_EQ_U64(read, N);
+    for (size_t i = 0; i < N; i++) CHECK(hits[i].prim_id == VKRT_NO_HIT && hits[i].t == -1.0f);
+}
+
 /* The SIMD four-triangle watertight test equals intersect_triangle_watertight_f, answer and
  * t, u, v bit for bit, where its special cases live: corners on a small integer grid and rays
  * from grid points along grid directions and at corners and edge midpoints (edge values of
@@ -1298,6 +1429,8 @@ int main(void)
     RUN(cpu_double_watertight_never_misses_shared_edges_and_vertices);
     RUN(cpu_trace_rays_bvh_naive_and_precisions_agree);
     RUN(bvh4_box_test_simd_equals_binary_box_test_on_hostile_inputs);
+    RUN(ray_cull_test4_equals_the_reference_root_test_on_hostile_rays);
+    RUN(ray_cull_compact_keeps_order_and_stops_where_the_room_ends);
     RUN(watertight4_equals_scalar_watertight_on_hostile_triangles);
     RUN(bvh4_and_binary_traversal_give_identical_hits);
     RUN(double_reference_and_float_agree_on_camera_renders);

@@ -8,6 +8,7 @@
 
 #include "check.h"
 #include "context.h"
+#include "cpu_trace.h"
 #include "huge_pages.h"
 #include "ray_offset.h"
 #include "shaders_embedded.h"
@@ -601,6 +602,77 @@ static void gpu_trace_rays_match_cpu_and_naive(void)
         vkrt_scene_destroy(sg);
         vkrt_scene_destroy(sc);
     }
+}
+
+/* vkrt_trace_rays through the BVH sends the device only the rays that may enter the scene's
+ * box and writes the others' misses on the host (ray_cull.h). Rays from a sphere around the
+ * bunny towards points around it, most of them missing its box, a few that must miss (NaN
+ * origins, zero directions) and a few too short to reach it, more than a chunk of them: the
+ * BVH's closest hits equal naive traversal's, which gets every ray, bit for bit, its any-hit
+ * answers naive traversal's (whether, not which), and both the CPU backend's. Rays that all
+ * miss: a call with nothing for the device. */
+static void gpu_trace_rays_answer_rays_missing_the_scene_box_on_the_host(void)
+{
+    const char *path = VKRT_MODELS_DIR "/meshes/bunny.obj";
+    vkrt_scene *sg = make_scene(gpu, path, VKRT_BVH_BUILDER_DEFAULT);
+    vkrt_scene *sc = make_scene(cpu, path, VKRT_BVH_BUILDER_DEFAULT);
+    if (!sg || !sc) {
+        CHECK(!"scenes");
+        vkrt_scene_destroy(sg);
+        vkrt_scene_destroy(sc);
+        return;
+    }
+    const size_t n = VKRT_RESUME_RAY_CHUNK + 3001;
+    vkrt_ray *rays = calloc(n, sizeof *rays);
+    CHECK(rays != NULL);
+    test_rng rng = { 31337 };
+    size_t enter = 0;
+    for (size_t i = 0; rays && i < n; i++) {
+        double o[3], target[3];
+        rng_unit_vector(&rng, o);
+        for (int a = 0; a < 3; a++) target[a] = 1.6 * (rng_uniform(&rng) - 0.5);
+        vkrt_ray *r = &rays[i];
+        *r = (vkrt_ray){ .origin = { (float)(1.5 * o[0]), (float)(1.5 * o[1]), (float)(1.5 * o[2]) } };
+        for (int a = 0; a < 3; a++) r->dir[a] = (float)target[a] - r->origin[a];
+        if (i % 97 == 3) r->origin[i % 3] = NAN;
+        if (i % 89 == 7) r->dir[0] = r->dir[1] = r->dir[2] = 0.0f;
+        if (i % 83 == 11) r->tmax = 0.05f; /* ends before the box */
+        enter += cpu_trace_ray_enters_box(r, &sg->bvh.nodes[0]);
+    }
+    fprintf(stderr, "  %zu of %zu rays may enter the box\n", enter, n);
+    CHECK(enter > n / 5 && enter < n - n / 4);
+    for (int any = 0; rays && any <= 1; any++) {
+        vkrt_trace_desc d = { .any_hit = any != 0 };
+        vkrt_hit *g = trace_all(gpu, sg, &d, rays, n), *c = trace_all(cpu, sc, &d, rays, n);
+        d.traversal = VKRT_TRAVERSAL_NAIVE;
+        vkrt_hit *gn = trace_all(gpu, sg, &d, rays, n);
+        size_t hits = 0, same = 0;
+        for (size_t i = 0; i < n; i++) {
+            hits += g[i].prim_id != VKRT_NO_HIT;
+            /* Any hit answers whether, not which. */
+            same += any ? (g[i].prim_id == VKRT_NO_HIT) == (c[i].prim_id == VKRT_NO_HIT) : g[i].prim_id == c[i].prim_id;
+        }
+        fprintf(stderr, "  any hit %d: %zu hits, GPU = CPU on %zu rays\n", any, hits, same);
+        CHECK(hits > n / 10);
+        CHECK_MSG(memcmp(g, gn, n * sizeof *g) == 0 || any, "GPU BVH and naive closest hits differ");
+        size_t same_naive = 0;
+        for (size_t i = 0; any && i < n; i++) same_naive += (g[i].prim_id == VKRT_NO_HIT) == (gn[i].prim_id == VKRT_NO_HIT);
+        CHECK(!any || same_naive == n);
+        CHECK(same >= (size_t)(0.999 * n));
+        free(g);
+        free(c);
+        free(gn);
+    }
+    /* A call whose rays all miss the box sends the device nothing and answers every ray. */
+    vkrt_ray away[5];
+    vkrt_hit away_hits[5];
+    for (int i = 0; i < 5; i++) away[i] = (vkrt_ray){ .origin = { 0.0f, 0.0f, 2.0f + (float)i }, .dir = { 0.0f, 0.1f * (float)i, 1.0f } };
+    memset(away_hits, 0x5A, sizeof away_hits);
+    CHECK(vkrt_trace_rays(gpu, sg, &(vkrt_trace_desc){ 0 }, away, 5, away_hits) == VKRT_OK);
+    for (int i = 0; i < 5; i++) CHECK(away_hits[i].t == -1.0f && away_hits[i].prim_id == VKRT_NO_HIT && away_hits[i].u == 0.0f);
+    free(rays);
+    vkrt_scene_destroy(sg);
+    vkrt_scene_destroy(sc);
 }
 
 /* The spatial-split BVH (a triangle in several leaves, each box bounding its part) answers
@@ -1367,6 +1439,7 @@ int main(void)
     RUN(gpu_refuses_double_precision);
     RUN(gpu_trace_rays_follow_the_documented_rules);
     RUN(gpu_trace_rays_match_cpu_and_naive);
+    RUN(gpu_trace_rays_answer_rays_missing_the_scene_box_on_the_host);
     RUN(gpu_wide_traversal_matches_the_binary_one);
     RUN(gpu_spatial_splits_give_the_hits_of_sah);
     RUN(gpu_watertight_never_misses_shared_edges_and_vertices);
