@@ -105,6 +105,13 @@ const char *vkrt_context_device_name(const vkrt_context *ctx)
     return ctx->vk ? ctx->vk->properties.deviceName : "CPU reference";
 }
 
+const char *vkrt_cpu_code(void)
+{
+    core c;
+    core_init(&c, NULL, NULL, NULL);
+    return cpu_trace_isa_name(cpu_trace_isa(&c));
+}
+
 vkrt_result vkrt_devices_list(const vkrt_context_desc *desc, vkrt_device_info *out, uint32_t *inout_count)
 {
     if (!inout_count) return VKRT_ERROR_INVALID_ARGUMENT;

@@ -239,13 +239,13 @@ static vkrt_result measure_query(compare *c, query q)
 static void print_header(const compare *c)
 {
     const vkrt_scene_stats *s = &c->stats[ENGINE_VKRT_CPU];
-    fprintf(c->out, "vkrt bench --compare embree: %s (%llu triangles), %ux%u; Embree %s and vkrt's CPU backend on %u "
-                    "thread%s, GPU %s;\nmedian of %u timed call%s after a warm-up, wall-clock time of the whole call "
+    fprintf(c->out, "vkrt bench --compare embree: %s (%llu triangles), %ux%u; Embree %s and vkrt's CPU backend (%s "
+                    "code) on %u thread%s, GPU %s;\nmedian of %u timed call%s after a warm-up, wall-clock time of the whole call "
                     "(on the GPU with the upload of the rays and the readback of the hits);\nprimary rays through the "
                     "pixel centres, then %d cosine-distributed AO rays per primary hit from vkrt_ray_offset origins, "
                     "up to distance %g\n\n",
             bench_scene_name(&c->source), (unsigned long long)s->triangles, c->width, c->height,
-            bench_embree_version(), c->threads, c->threads == 1 ? "" : "s",
+            bench_embree_version(), vkrt_cpu_code(), c->threads, c->threads == 1 ? "" : "s",
             c->gpu ? vkrt_context_device_name(c->gpu) : "not run", c->repeat, c->repeat == 1 ? "" : "s",
             BENCH_COMPARE_AO_RAYS_PER_HIT, (double)BENCH_COMPARE_AO_DISTANCE);
     if (c->gpu_skipped[0]) fprintf(c->out, "%s\n\n", c->gpu_skipped);

@@ -5,6 +5,7 @@
 #define VKRT_CORE_H
 
 #include <stdarg.h>
+#include <stdbool.h>
 #include <stddef.h>
 #include <stdint.h>
 
@@ -19,6 +20,9 @@ typedef struct core {
     /* Tests: a work pool starts at most this many threads in all, the caller included, as if
      * the others had failed to start (0, the default: no limit). */
     uint32_t test_thread_cap;
+    /* Tests: the CPU tracer runs its baseline code even where the host could run its x86-64-v3
+     * build (cpu_trace_isa). */
+    bool test_cpu_baseline;
     char last_error[CORE_ERROR_SIZE];
 } core;
 

@@ -115,6 +115,15 @@ static hit trace_float(const cpu_trace_scene *s, vkrt_traversal traversal, vkrt_
     return trace_ray_f(s, traversal, isect, r, heat, any_hit);
 }
 
+/* This file is compiled twice where the compiler can target x86-64-v3 (meson.build): once for
+ * the baseline (SSE2, every x86-64), and once with VKRT_CPU_TRACE_X86_64_V3 and
+ * -march=x86-64-v3, which makes only the two entry points below with that suffix. AVX2's
+ * three-operand encodings, BMI's bit scans and the wider registers cut moves and spills from
+ * the traversal; floating-point contraction stays off (ISO C mode and -ffp-contract=off), so
+ * both builds round every operation alike and give the same bits. cpu_trace_render and
+ * cpu_trace_rays run the v3 code where the host has it (cpu_trace_isa). The other entry points
+ * (tests, the GPU wavefront's one-ray trace) exist in the baseline build only. */
+#ifndef VKRT_CPU_TRACE_X86_64_V3
 unsigned cpu_trace_box4_test(const vkrt_gpu_ray *ray, const bvh4_node *n, float best_t, bool simd,
                              float out_tnear[BVH4_WIDTH])
 {
@@ -167,6 +176,8 @@ bool cpu_trace_one(const cpu_trace_scene *s, vkrt_traversal traversal, vkrt_inte
                                     : (vkrt_gpu_hit){ -1.0f, NO_PRIM, 0.0f, 0.0f };
     return best.prim != NO_PRIM;
 }
+
+#endif /* !VKRT_CPU_TRACE_X86_64_V3 */
 
 static void shade(const cpu_trace_scene *s, const cpu_trace_params *p, const hit *best, const heat_counts *heat,
                   float out[4])
@@ -446,8 +457,19 @@ static vkrt_result run_job(core *c, job *j, uint32_t threads, vkrt_progress_fn p
     return VKRT_OK;
 }
 
-vkrt_result cpu_trace_render(core *c, const cpu_trace_scene *scene, const cpu_trace_params *params, float *out_rgba,
-                             trace_counts *out_counts)
+#ifdef VKRT_CPU_TRACE_X86_64_V3
+#define CPU_TRACE_ENTRY(name) name##_x86_64_v3
+#else
+#define CPU_TRACE_ENTRY(name) name##_baseline
+#endif
+
+vkrt_result CPU_TRACE_ENTRY(cpu_trace_render)(core *c, const cpu_trace_scene *scene, const cpu_trace_params *params,
+                                              float *out_rgba, trace_counts *out_counts);
+vkrt_result CPU_TRACE_ENTRY(cpu_trace_rays)(core *c, const cpu_trace_scene *scene, const cpu_trace_rays_params *params,
+                                            const vkrt_ray *rays, size_t count, vkrt_hit *out_hits);
+
+vkrt_result CPU_TRACE_ENTRY(cpu_trace_render)(core *c, const cpu_trace_scene *scene, const cpu_trace_params *params,
+                                              float *out_rgba, trace_counts *out_counts)
 {
     const uint32_t width = params->camera.width, height = params->camera.height;
     const vkrt_gpu_push *p = &params->camera;
@@ -477,8 +499,8 @@ vkrt_result cpu_trace_render(core *c, const cpu_trace_scene *scene, const cpu_tr
     return r;
 }
 
-vkrt_result cpu_trace_rays(core *c, const cpu_trace_scene *scene, const cpu_trace_rays_params *params,
-                           const vkrt_ray *rays, size_t count, vkrt_hit *out_hits)
+vkrt_result CPU_TRACE_ENTRY(cpu_trace_rays)(core *c, const cpu_trace_scene *scene, const cpu_trace_rays_params *params,
+                                            const vkrt_ray *rays, size_t count, vkrt_hit *out_hits)
 {
     const size_t blocks = (count + RAY_BLOCK - 1) / RAY_BLOCK;
     if (blocks > UINT32_MAX)
@@ -496,3 +518,60 @@ vkrt_result cpu_trace_rays(core *c, const cpu_trace_scene *scene, const cpu_trac
     if (j.items == 0) return VKRT_OK;
     return run_job(c, &j, params->threads, params->progress, params->progress_user);
 }
+
+#ifndef VKRT_CPU_TRACE_X86_64_V3
+#ifdef VKRT_HAVE_CPU_TRACE_X86_64_V3
+vkrt_result cpu_trace_render_x86_64_v3(core *c, const cpu_trace_scene *scene, const cpu_trace_params *params,
+                                       float *out_rgba, trace_counts *out_counts);
+vkrt_result cpu_trace_rays_x86_64_v3(core *c, const cpu_trace_scene *scene, const cpu_trace_rays_params *params,
+                                     const vkrt_ray *rays, size_t count, vkrt_hit *out_hits);
+#endif
+
+#ifdef VKRT_HAVE_CPU_TRACE_X86_64_V3
+static bool host_runs_x86_64_v3(void)
+{
+#if defined(__clang__)
+    /* clang 14 cannot ask for the ISA level: the level's features it can ask for (every CPU with
+     * them has the others the level adds: LZCNT, MOVBE, F16C, XSAVE). */
+    return __builtin_cpu_supports("avx") && __builtin_cpu_supports("avx2") && __builtin_cpu_supports("bmi") &&
+           __builtin_cpu_supports("bmi2") && __builtin_cpu_supports("fma") && __builtin_cpu_supports("popcnt");
+#else
+    return __builtin_cpu_supports("x86-64-v3");
+#endif
+}
+#endif
+
+cpu_trace_code cpu_trace_isa(const core *c)
+{
+#ifdef VKRT_HAVE_CPU_TRACE_X86_64_V3
+    if (!c->test_cpu_baseline && host_runs_x86_64_v3()) return CPU_TRACE_X86_64_V3;
+#else
+    (void)c;
+#endif
+    return CPU_TRACE_BASELINE;
+}
+
+const char *cpu_trace_isa_name(cpu_trace_code code)
+{
+    return code == CPU_TRACE_X86_64_V3 ? "x86-64-v3" : "baseline";
+}
+
+vkrt_result cpu_trace_render(core *c, const cpu_trace_scene *scene, const cpu_trace_params *params, float *out_rgba,
+                             trace_counts *out_counts)
+{
+#ifdef VKRT_HAVE_CPU_TRACE_X86_64_V3
+    if (cpu_trace_isa(c) == CPU_TRACE_X86_64_V3)
+        return cpu_trace_render_x86_64_v3(c, scene, params, out_rgba, out_counts);
+#endif
+    return cpu_trace_render_baseline(c, scene, params, out_rgba, out_counts);
+}
+
+vkrt_result cpu_trace_rays(core *c, const cpu_trace_scene *scene, const cpu_trace_rays_params *params,
+                           const vkrt_ray *rays, size_t count, vkrt_hit *out_hits)
+{
+#ifdef VKRT_HAVE_CPU_TRACE_X86_64_V3
+    if (cpu_trace_isa(c) == CPU_TRACE_X86_64_V3) return cpu_trace_rays_x86_64_v3(c, scene, params, rays, count, out_hits);
+#endif
+    return cpu_trace_rays_baseline(c, scene, params, rays, count, out_hits);
+}
+#endif /* !VKRT_CPU_TRACE_X86_64_V3 */

@@ -80,7 +80,8 @@ BVH4_INLINE unsigned box4_test(const box4_ray *b, const bvh4_node *n, float best
 }
 
 /* box4_test's reference for the tests (cpu_trace_box4_test): each used slot through
- * intersect_box_f itself. */
+ * intersect_box_f itself. Not in cpu_trace.c's x86-64-v3 build, which has no test entry points. */
+#ifndef VKRT_CPU_TRACE_X86_64_V3
 static unsigned box4_test_scalar(const ray_f *r, const bvh4_node *n, float best_t, float tnear[BVH4_WIDTH])
 {
     unsigned mask = 0;
@@ -92,6 +93,7 @@ static unsigned box4_test_scalar(const ray_f *r, const bvh4_node *n, float best_
     }
     return mask;
 }
+#endif
 
 /* intersect_triangle_watertight_f on four triangles at once, lane l the triangle tris[l]:
  * the same operations in the same order on each lane (the per-ray permutation picks whole

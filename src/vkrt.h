@@ -127,6 +127,10 @@ const char *vkrt_context_last_error(const vkrt_context *ctx);
 uint32_t vkrt_context_validation_messages(const vkrt_context *ctx);
 /* The device the context runs on ("CPU reference" for the CPU backend). */
 const char *vkrt_context_device_name(const vkrt_context *ctx);
+/* The machine code the CPU backend traces with on this host: "x86-64-v3" (the tracer's AVX2
+ * build, where the library has one and the host can run it) or "baseline" (SSE2). Both give
+ * the same bits. */
+const char *vkrt_cpu_code(void);
 
 typedef enum vkrt_device_type {
     VKRT_DEVICE_OTHER = 0,

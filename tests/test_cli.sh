@@ -283,6 +283,9 @@ assert int(primary["ray_count"]) == 64 * 64 and int(ref[("ao", "closest")]["ray_
 PY
   then ok "bench --compare embree CSV: 9 rows, Embree's checksums met by both backends"
   else bad "bench --compare embree CSV: 9 rows, Embree's checksums met by both backends"; fi
+  if grep -Eq "vkrt's CPU backend \((x86-64-v3|baseline) code\) on [0-9]+ threads?" "$tmp/out"
+  then ok "bench --compare embree names the CPU backend's machine code"
+  else bad "bench --compare embree names the CPU backend's machine code"; fi
 else
   "$vkrt" bench --quick --compare embree >"$tmp/out" 2>"$tmp/err"
   got=$?

@@ -1406,6 +1406,89 @@ static void bvh4_and_binary_traversal_give_identical_hits(void)
     }
 }
 
+/* The x86-64-v3 build of the CPU tracer (cpu_trace_isa) answers as the baseline build bit for
+ * bit: vkrt_trace_rays' hits through the 4-wide and the binary BVH, closest and any hit, float
+ * and double, both intersectors, and the renders of the modes that read hits with their
+ * counters. The same source compiled for AVX2 must round every operation as the baseline does
+ * (no contraction into FMA), or the CPU's images would stop equalling the GPU's. On a host
+ * without x86-64-v3 both runs are the baseline, which the test says. */
+static void x86_64_v3_build_answers_as_the_baseline_bit_for_bit(void)
+{
+    const cpu_trace_code code = cpu_trace_isa(&c);
+    fprintf(stderr, "  this host runs the %s code\n", cpu_trace_isa_name(code));
+    c.test_cpu_baseline = true;
+    CHECK(cpu_trace_isa(&c) == CPU_TRACE_BASELINE);
+    c.test_cpu_baseline = false;
+    const char *files[2] = { "bunny.obj", "dragon_11k.obj" };
+    for (int f = 0; f < 2; f++) {
+        vkrt_scene *s = model_scene(files[f]);
+        if (!s) continue;
+        const cpu_trace_scene binary = { .nodes = s->bvh.nodes, .node_count = s->bvh.node_count, .tris = s->tris,
+                                         .tri_count = s->bvh.tri_count };
+        cpu_trace_scene wide = binary;
+        wide.wide = &s->wide;
+        size_t n;
+        vkrt_ray *rays = identity_rays(&binary, &n);
+        vkrt_hit *hb = calloc(n, sizeof *hb), *hv = calloc(n, sizeof *hv);
+        if (!hb || !hv) abort();
+        size_t calls = 0, differ = 0;
+        for (int w = 0; w < 2; w++) {
+            for (int isect = VKRT_INTERSECTOR_WATERTIGHT; isect <= VKRT_INTERSECTOR_MOLLER_TRUMBORE; isect++) {
+                for (int prec = VKRT_PRECISION_FLOAT; prec <= VKRT_PRECISION_DOUBLE; prec++) {
+                    for (int any = 0; any < 2; any++) {
+                        cpu_trace_rays_params p = { .traversal = VKRT_TRAVERSAL_BVH, .any_hit = any,
+                                                    .intersector = (vkrt_intersector)isect,
+                                                    .precision = (vkrt_precision)prec, .threads = 2 };
+                        c.test_cpu_baseline = true;
+                        CHECK(cpu_trace_rays(&c, w ? &wide : &binary, &p, rays, n, hb) == VKRT_OK);
+                        c.test_cpu_baseline = false;
+                        CHECK(cpu_trace_rays(&c, w ? &wide : &binary, &p, rays, n, hv) == VKRT_OK);
+                        calls++;
+                        if (memcmp(hb, hv, n * sizeof *hb) != 0 && differ++ < 3)
+                            fprintf(stderr, "  %s wide %d isect %d precision %d any %d: hits differ\n", files[f], w,
+                                    isect, prec, any);
+                    }
+                }
+            }
+        }
+        const uint32_t w = 64, h = 48;
+        vkrt_gpu_push cam;
+        camera_basis cam_d;
+        CHECK(camera_setup(&c, &(vkrt_camera){ 0 }, w, h, &cam) == VKRT_OK);
+        CHECK(camera_setup_double(&c, &(vkrt_camera){ 0 }, w, h, &cam_d) == VKRT_OK);
+        float *ib = malloc((size_t)w * h * 4 * sizeof *ib), *iv = malloc((size_t)w * h * 4 * sizeof *iv);
+        if (!ib || !iv) abort();
+        for (int wide_bvh = 0; wide_bvh < 2; wide_bvh++) {
+            for (vkrt_mode m = VKRT_MODE_NORMAL; m <= VKRT_MODE_ID; m++) {
+                for (int counted = 0; counted < 2; counted++) {
+                    cpu_trace_params p = { .camera = cam, .mode = m, .traversal = VKRT_TRAVERSAL_BVH,
+                                           .heat = VKRT_HEAT_NODES, .camera_d = cam_d, .counters = counted,
+                                           .threads = 2 };
+                    trace_counts cb, cv;
+                    c.test_cpu_baseline = true;
+                    CHECK(cpu_trace_render(&c, wide_bvh ? &wide : &binary, &p, ib, &cb) == VKRT_OK);
+                    c.test_cpu_baseline = false;
+                    CHECK(cpu_trace_render(&c, wide_bvh ? &wide : &binary, &p, iv, &cv) == VKRT_OK);
+                    calls++;
+                    if ((memcmp(ib, iv, (size_t)w * h * 4 * sizeof *ib) != 0 || cb.nodes != cv.nodes ||
+                         cb.tris != cv.tris) &&
+                        differ++ < 3)
+                        fprintf(stderr, "  %s wide %d mode %d counted %d: images differ\n", files[f], wide_bvh, (int)m,
+                                counted);
+                }
+            }
+        }
+        fprintf(stderr, "  %s: %zu calls (%zu rays each or 64x48 images), %zu differ\n", files[f], calls, n, differ);
+        CHECK_EQ_U64(differ, 0);
+        free(ib);
+        free(iv);
+        free(hb);
+        free(hv);
+        free(rays);
+        vkrt_scene_destroy(s);
+    }
+}
+
 int main(void)
 {
     core_init(&c, NULL, NULL, NULL);
@@ -1433,6 +1516,7 @@ int main(void)
     RUN(ray_cull_compact_keeps_order_and_stops_where_the_room_ends);
     RUN(watertight4_equals_scalar_watertight_on_hostile_triangles);
     RUN(bvh4_and_binary_traversal_give_identical_hits);
+    RUN(x86_64_v3_build_answers_as_the_baseline_bit_for_bit);
     RUN(double_reference_and_float_agree_on_camera_renders);
     RUN(eye_inside_a_closed_mesh_always_hits);
     RUN(cpu_grazing_hit_distances_are_exact);
