@@ -23,8 +23,7 @@ unsigned ray_cull_test4(const vkrt_ray rays[4], const vkrt_gpu_node *box)
     f4_transpose(o);
     f4_transpose(d);
     const float4 inf = f4_set1(INFINITY), minus_inf = f4_set1(-INFINITY), zero = f4_set1(0.0f);
-    float4 valid = f4_set1(0.0f);
-    valid = f4_eq(valid, valid); /* all lanes true */
+    float4 valid = f4_mask(0xFu);
     for (int a = 0; a < 3; a++) valid = f4_and(valid, f4_and(f4_lt(f4_abs(o[a]), inf), f4_lt(f4_abs(d[a]), inf)));
     valid = f4_andnot(f4_and(f4_and(f4_eq(d[0], zero), f4_eq(d[1], zero)), f4_eq(d[2], zero)), valid);
     const float lo[3] = { box->bmin.x, box->bmin.y, box->bmin.z }, hi[3] = { box->bmax.x, box->bmax.y, box->bmax.z };
