@@ -1319,6 +1319,61 @@ static vkrt_ray *identity_rays(const cpu_trace_scene *binary, size_t *out_count)
     return rays;
 }
 
+/* A scene's CPU views: through its binary BVH alone, and with its 4-wide BVH as well. */
+static void scene_views(const vkrt_scene *s, cpu_trace_scene *out_binary, cpu_trace_scene *out_wide)
+{
+    *out_binary = (cpu_trace_scene){ .nodes = s->bvh.nodes, .node_count = s->bvh.node_count, .tris = s->tris,
+                                     .tri_count = s->bvh.tri_count };
+    *out_wide = *out_binary;
+    out_wide->wide = &s->wide;
+}
+
+/* The default camera for a w x h image, in float and in double. */
+static void default_camera(uint32_t w, uint32_t h, vkrt_gpu_push *out_cam, camera_basis *out_cam_d)
+{
+    CHECK(camera_setup(&c, &(vkrt_camera){ 0 }, w, h, out_cam) == VKRT_OK);
+    CHECK(camera_setup_double(&c, &(vkrt_camera){ 0 }, w, h, out_cam_d) == VKRT_OK);
+}
+
+/* A model's scene, its two CPU views, its identity rays and two hit arrays for them, and the
+ * default camera with two images of FIXTURE_W x FIXTURE_H, for two ways of tracing to compare. */
+enum { FIXTURE_W = 64, FIXTURE_H = 48 };
+typedef struct ray_fixture {
+    vkrt_scene *scene;
+    cpu_trace_scene binary, wide;
+    vkrt_ray *rays;
+    size_t n;
+    vkrt_hit *a, *b;
+    vkrt_gpu_push cam;
+    camera_basis cam_d;
+    float *image_a, *image_b;
+} ray_fixture;
+
+static bool ray_fixture_open(const char *file, ray_fixture *out)
+{
+    *out = (ray_fixture){ .scene = model_scene(file) };
+    if (!out->scene) return false;
+    scene_views(out->scene, &out->binary, &out->wide);
+    out->rays = identity_rays(&out->binary, &out->n);
+    out->a = calloc(out->n, sizeof *out->a);
+    out->b = calloc(out->n, sizeof *out->b);
+    default_camera(FIXTURE_W, FIXTURE_H, &out->cam, &out->cam_d);
+    out->image_a = malloc((size_t)FIXTURE_W * FIXTURE_H * 4 * sizeof(float));
+    out->image_b = malloc((size_t)FIXTURE_W * FIXTURE_H * 4 * sizeof(float));
+    if (!out->a || !out->b || !out->image_a || !out->image_b) abort();
+    return true;
+}
+
+static void ray_fixture_close(ray_fixture *f)
+{
+    free(f->a);
+    free(f->b);
+    free(f->image_a);
+    free(f->image_b);
+    free(f->rays);
+    vkrt_scene_destroy(f->scene);
+}
+
 /* On real meshes, every ray of identity_rays through the binary and the 4-wide traversal, with
  * both intersectors: closest hits identical (t, u, v and triangle, so prim_id, bit for bit),
  * one ray at a time and through cpu_trace_rays (with the refined distance); any-hit rays hit
@@ -1328,17 +1383,13 @@ static void bvh4_and_binary_traversal_give_identical_hits(void)
 {
     const char *files[2] = { "bunny.obj", "dragon_11k.obj" };
     for (int f = 0; f < 2; f++) {
-        vkrt_scene *s = model_scene(files[f]);
-        if (!s) continue;
-        CHECK_MSG(s->wide.nodes != NULL, "%s: the CPU scene has no 4-wide BVH", files[f]);
-        const cpu_trace_scene binary = { .nodes = s->bvh.nodes, .node_count = s->bvh.node_count, .tris = s->tris,
-                                         .tri_count = s->bvh.tri_count };
-        cpu_trace_scene wide = binary;
-        wide.wide = &s->wide;
-        size_t n;
-        vkrt_ray *rays = identity_rays(&binary, &n);
-        vkrt_hit *hb = calloc(n, sizeof *hb), *hw = calloc(n, sizeof *hw);
-        if (!hb || !hw) abort();
+        ray_fixture fx;
+        if (!ray_fixture_open(files[f], &fx)) continue;
+        CHECK_MSG(fx.scene->wide.nodes != NULL, "%s: the CPU scene has no 4-wide BVH", files[f]);
+        const cpu_trace_scene binary = fx.binary, wide = fx.wide;
+        const size_t n = fx.n;
+        const vkrt_ray *rays = fx.rays;
+        vkrt_hit *hb = fx.a, *hw = fx.b;
         for (int isect = VKRT_INTERSECTOR_WATERTIGHT; isect <= VKRT_INTERSECTOR_MOLLER_TRUMBORE; isect++) {
             size_t hits = 0, differ = 0, any_differ = 0;
             for (size_t i = 0; i < n; i++) {
@@ -1378,13 +1429,10 @@ static void bvh4_and_binary_traversal_give_identical_hits(void)
             }
         }
         /* Renders: the same images in the modes that read hits; the counted ones equal too. */
-        const uint32_t w = 64, h = 48;
-        vkrt_gpu_push cam;
-        camera_basis cam_d;
-        CHECK(camera_setup(&c, &(vkrt_camera){ 0 }, w, h, &cam) == VKRT_OK);
-        CHECK(camera_setup_double(&c, &(vkrt_camera){ 0 }, w, h, &cam_d) == VKRT_OK);
-        float *ib = malloc((size_t)w * h * 4 * sizeof *ib), *iw = malloc((size_t)w * h * 4 * sizeof *iw);
-        if (!ib || !iw) abort();
+        const uint32_t w = FIXTURE_W, h = FIXTURE_H;
+        const vkrt_gpu_push cam = fx.cam;
+        const camera_basis cam_d = fx.cam_d;
+        float *ib = fx.image_a, *iw = fx.image_b;
         for (vkrt_mode m = VKRT_MODE_NORMAL; m <= VKRT_MODE_ID; m++) {
             for (int counted = 0; counted < 2; counted++) {
                 cpu_trace_params p = { .camera = cam, .mode = m, .traversal = VKRT_TRAVERSAL_BVH, .heat = VKRT_HEAT_NODES,
@@ -1397,12 +1445,7 @@ static void bvh4_and_binary_traversal_give_identical_hits(void)
                 if (counted) CHECK(cw.nodes > 0 && cw.tris > 0);
             }
         }
-        free(ib);
-        free(iw);
-        free(hb);
-        free(hw);
-        free(rays);
-        vkrt_scene_destroy(s);
+        ray_fixture_close(&fx);
     }
 }
 
@@ -1421,16 +1464,12 @@ static void x86_64_v3_build_answers_as_the_baseline_bit_for_bit(void)
     c.test_cpu_baseline = false;
     const char *files[2] = { "bunny.obj", "dragon_11k.obj" };
     for (int f = 0; f < 2; f++) {
-        vkrt_scene *s = model_scene(files[f]);
-        if (!s) continue;
-        const cpu_trace_scene binary = { .nodes = s->bvh.nodes, .node_count = s->bvh.node_count, .tris = s->tris,
-                                         .tri_count = s->bvh.tri_count };
-        cpu_trace_scene wide = binary;
-        wide.wide = &s->wide;
-        size_t n;
-        vkrt_ray *rays = identity_rays(&binary, &n);
-        vkrt_hit *hb = calloc(n, sizeof *hb), *hv = calloc(n, sizeof *hv);
-        if (!hb || !hv) abort();
+        ray_fixture fx;
+        if (!ray_fixture_open(files[f], &fx)) continue;
+        const cpu_trace_scene binary = fx.binary, wide = fx.wide;
+        const size_t n = fx.n;
+        const vkrt_ray *rays = fx.rays;
+        vkrt_hit *hb = fx.a, *hv = fx.b;
         size_t calls = 0, differ = 0;
         for (int w = 0; w < 2; w++) {
             for (int isect = VKRT_INTERSECTOR_WATERTIGHT; isect <= VKRT_INTERSECTOR_MOLLER_TRUMBORE; isect++) {
@@ -1451,13 +1490,10 @@ static void x86_64_v3_build_answers_as_the_baseline_bit_for_bit(void)
                 }
             }
         }
-        const uint32_t w = 64, h = 48;
-        vkrt_gpu_push cam;
-        camera_basis cam_d;
-        CHECK(camera_setup(&c, &(vkrt_camera){ 0 }, w, h, &cam) == VKRT_OK);
-        CHECK(camera_setup_double(&c, &(vkrt_camera){ 0 }, w, h, &cam_d) == VKRT_OK);
-        float *ib = malloc((size_t)w * h * 4 * sizeof *ib), *iv = malloc((size_t)w * h * 4 * sizeof *iv);
-        if (!ib || !iv) abort();
+        const uint32_t w = FIXTURE_W, h = FIXTURE_H;
+        const vkrt_gpu_push cam = fx.cam;
+        const camera_basis cam_d = fx.cam_d;
+        float *ib = fx.image_a, *iv = fx.image_b;
         for (int wide_bvh = 0; wide_bvh < 2; wide_bvh++) {
             for (vkrt_mode m = VKRT_MODE_NORMAL; m <= VKRT_MODE_ID; m++) {
                 for (int counted = 0; counted < 2; counted++) {
@@ -1480,12 +1516,7 @@ static void x86_64_v3_build_answers_as_the_baseline_bit_for_bit(void)
         }
         fprintf(stderr, "  %s: %zu calls (%zu rays each or 64x48 images), %zu differ\n", files[f], calls, n, differ);
         CHECK_EQ_U64(differ, 0);
-        free(ib);
-        free(iv);
-        free(hb);
-        free(hv);
-        free(rays);
-        vkrt_scene_destroy(s);
+        ray_fixture_close(&fx);
     }
 }
 
