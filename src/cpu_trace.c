@@ -363,7 +363,7 @@ static bool run_tile(job *j, size_t t)
 /* A float hit as vkrt_trace_rays returns it: the distance refined in double along r. */
 static vkrt_hit public_hit_f(const cpu_trace_scene *s, const ray_f *r, hit best)
 {
-    if (best.prim == NO_PRIM) return (vkrt_hit){ .t = -1.0f, .prim_id = VKRT_NO_HIT };
+    if (best.prim == NO_PRIM) return cpu_trace_miss();
     best.t = refine_hit_distance((vec3_d){ r->origin.x, r->origin.y, r->origin.z }, (vec3_d){ r->dir.x, r->dir.y, r->dir.z },
                                  r->tmin, r->tmax, &s->tris[best.tri], best.t);
     return (vkrt_hit){ .t = best.t, .prim_id = best.prim, .u = best.u, .v = best.v };
@@ -377,11 +377,11 @@ static vkrt_hit trace_one_ray(const job *j, const vkrt_ray *in)
     if (p->precision == VKRT_PRECISION_DOUBLE) {
         ray_d r;
         if (ray_from_buffer_d(in, &r)) best = trace_ray_d(j->scene, p->traversal, p->intersector, &r, &heat, p->any_hit);
-        if (best.prim == NO_PRIM) return (vkrt_hit){ .t = -1.0f, .prim_id = VKRT_NO_HIT };
+        if (best.prim == NO_PRIM) return cpu_trace_miss();
         return (vkrt_hit){ .t = best.t, .prim_id = best.prim, .u = best.u, .v = best.v };
     }
     ray_f r;
-    if (!ray_from_buffer_f(in, &r)) return (vkrt_hit){ .t = -1.0f, .prim_id = VKRT_NO_HIT };
+    if (!ray_from_buffer_f(in, &r)) return cpu_trace_miss();
     return public_hit_f(j->scene, &r, trace_float(j->scene, p->traversal, p->intersector, &r, &heat, p->any_hit, false));
 }
 

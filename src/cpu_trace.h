@@ -65,6 +65,12 @@ typedef struct cpu_trace_rays_params {
 vkrt_result cpu_trace_rays(core *c, const cpu_trace_scene *scene, const cpu_trace_rays_params *params,
                            const vkrt_ray *rays, size_t count, vkrt_hit *out_hits);
 
+/* A miss as vkrt_trace_rays writes it (vkrt.h): t = -1, prim_id VKRT_NO_HIT, u = v = 0. */
+static inline vkrt_hit cpu_trace_miss(void)
+{
+    return (vkrt_hit){ .t = -1.0f, .prim_id = VKRT_NO_HIT };
+}
+
 /* Whether the reference's first step enters box for this ray: the float ray of a ray buffer
  * (false for one that must miss), box-tested against its tmax. What ray_cull_test4 is held
  * to by test_cpu_trace. */

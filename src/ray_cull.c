@@ -4,6 +4,7 @@
 #include <stddef.h>
 #include <string.h>
 
+#include "cpu_trace.h"
 #include "float4.h"
 
 _Static_assert(sizeof(vkrt_ray) == 8 * sizeof(float) && offsetof(vkrt_ray, tmin) == 3 * sizeof(float) &&
@@ -48,7 +49,7 @@ unsigned ray_cull_test4(const vkrt_ray rays[4], const vkrt_gpu_node *box)
 size_t ray_cull_compact(const vkrt_ray *rays, size_t count, const vkrt_gpu_node *box, size_t room, vkrt_ray *out_rays,
                         uint32_t *out_index, vkrt_hit *out_hits, size_t *out_read)
 {
-    const vkrt_hit miss = { .t = -1.0f, .prim_id = VKRT_NO_HIT };
+    const vkrt_hit miss = cpu_trace_miss();
     size_t copied = 0, i = 0;
     for (; i < count; i += 4) {
         unsigned mask = 0;
