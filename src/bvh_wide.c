@@ -3,7 +3,9 @@
  * Dammertz, Hanika, Keller, "Shallow Bounding Volume Hierarchies for Fast SIMD Ray Tracing of
  * Incoherent Rays", EGSR 2008. Each wide node takes a binary node's two children and keeps
  * opening the one of largest surface area (as Embree's wide builders choose the child to
- * split), which removes the interior nodes rays are most likely to enter. */
+ * split), which removes the interior nodes rays are most likely to enter. Small subtrees become
+ * leaves of up to four triangles, as Embree's wide BVHs hold them, where the binary SAH build
+ * (which prices a triangle test as a node visit) left them as a node over leaves of one or two. */
 #include "bvh_wide.h"
 
 #include <assert.h>
@@ -20,11 +22,49 @@ static double node_area(const vkrt_gpu_node *n)
     return 2.0 * (dx * dy + dy * dz + dz * dx);
 }
 
-/* What a slot may be opened for: its area, or -1 for a leaf (never opened). An interior
- * slot's children are fetched ahead, as they are read next if it is opened or pushed. */
+/* The triangles under binary node `node` as one leaf, where they are few enough
+ * (BVH4_LEAF_MERGE) and one contiguous run of the triangle array (the builders partition
+ * triangles in place, so a subtree's leaves lie side by side, though a spatial-split subtree's
+ * need not): returns their count and sets *first; 0 where the subtree stays a subtree. A binary
+ * leaf is returned as it is, whatever its size. The walk gives up at the first leaf past the
+ * limit, so it reads a handful of nodes. */
+static uint32_t subtree_leaf(const bvh *b, uint32_t node, uint32_t *first)
+{
+    const vkrt_gpu_node *top = &b->nodes[node];
+    if (top->tri_count != 0) {
+        *first = top->left_first;
+        return top->tri_count;
+    }
+    /* At most BVH4_LEAF_MERGE leaves are read, so at most that many right children wait at
+     * once on the way; a deeper subtree holds more triangles and is not merged. */
+    uint32_t stack[BVH4_LEAF_MERGE], sp = 0, count = 0, lo = UINT32_MAX, hi = 0, at = node;
+    for (;;) {
+        const vkrt_gpu_node *n = &b->nodes[at];
+        if (n->tri_count == 0) {
+            if (sp == BVH4_LEAF_MERGE) return 0;
+            stack[sp++] = n->left_first + 1;
+            at = n->left_first;
+            continue;
+        }
+        if ((count += n->tri_count) > BVH4_LEAF_MERGE) return 0;
+        if (n->left_first < lo) lo = n->left_first;
+        if (n->left_first + n->tri_count > hi) hi = n->left_first + n->tri_count;
+        if (sp == 0) break;
+        at = stack[--sp];
+    }
+    /* The leaves hold disjoint ranges, so they make one run exactly when its span is their sum. */
+    if (hi - lo != count) return 0;
+    *first = lo;
+    return count;
+}
+
+/* What a slot may be opened for: its area, or -1 for a leaf (never opened): a binary leaf or a
+ * subtree merged into one (subtree_leaf). An interior slot's children are fetched ahead, as
+ * they are read next if it is opened or pushed. */
 static double opening_area(const bvh *b, const vkrt_gpu_node *n)
 {
-    if (n->tri_count != 0) return -1.0;
+    uint32_t first;
+    if (n->tri_count != 0 || subtree_leaf(b, (uint32_t)(n - b->nodes), &first) != 0) return -1.0;
     __builtin_prefetch(&b->nodes[n->left_first]);
     return node_area(n);
 }
@@ -123,9 +163,10 @@ vkrt_result bvh4_collapse(core *c, const bvh *b, bvh4 *out)
         for (uint32_t i = 0; i < n; i++) {
             const vkrt_gpu_node *s = &b->nodes[slots[i]];
             set_slot_box(w, i, s);
-            if (s->tri_count != 0) {
-                w->child[i] = s->left_first;
-                w->count[i] = s->tri_count;
+            uint32_t first = 0, count = subtree_leaf(b, slots[i], &first);
+            if (count != 0) {
+                w->child[i] = first;
+                w->count[i] = count;
                 continue;
             }
             assert(out->node_count < capacity);

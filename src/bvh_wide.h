@@ -1,6 +1,7 @@
 /* A 4-wide BVH collapsed from the binary one (bvh.h): each node holds up to four child boxes
  * in structure-of-arrays form, so a traversal tests them together (SIMD on the CPU). Leaves
- * are the binary tree's, unchanged, and name ranges of the same triangle array (BVH order). */
+ * name ranges of the same triangle array (BVH order): the binary tree's leaves, and its
+ * subtrees of at most BVH4_LEAF_MERGE triangles, each merged into one leaf. */
 #ifndef VKRT_BVH_WIDE_H
 #define VKRT_BVH_WIDE_H
 
@@ -11,6 +12,10 @@
 
 #define BVH4_WIDTH 4
 #define BVH4_EMPTY 0xFFFFFFFFu            /* child[i] of an unused slot; its count is 0 */
+/* A binary subtree of at most this many triangles (in one run of the triangle array) becomes
+ * one leaf slot: the CPU tests four triangles together (cpu_trace_simd4.h), so such a leaf
+ * costs it one test where the subtree cost a node visit and a test per binary leaf entered. */
+#define BVH4_LEAF_MERGE 4u
 
 /* 128 bytes, two 64-byte cache lines; the array is 64-byte aligned. Slots 0..k-1 are used,
  * the rest BVH4_EMPTY with the empty box lo = +inf, hi = -inf (traversals skip them by their
@@ -38,7 +43,8 @@ typedef struct bvh4 {
 /* Collapses the binary BVH b into *out: starting from a node's two children, the child with
  * the largest surface area is replaced by its two children until there are four or only
  * leaves are left (the usual SAH-style collapse: the big boxes are the ones rays enter most
- * often). Boxes are copied bit for bit from the binary nodes, so a box test gives the binary
+ * often); a subtree of at most BVH4_LEAF_MERGE triangles counts as a leaf and becomes one
+ * slot. Boxes are copied bit for bit from the binary nodes, so a box test gives the binary
  * traversal's answer for the same box. b must be valid (bvh_validate); it is borrowed until
  * the call returns. Returns VKRT_OK, VKRT_ERROR_INVALID_ARGUMENT for an empty b, or
  * VKRT_ERROR_OUT_OF_MEMORY; on failure *out is zeroed. */

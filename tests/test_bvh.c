@@ -188,12 +188,14 @@ static void check_stats(const char *what, const bvh *b, const bvh_stats *s)
 static bool same_bits(float a, float b) { return memcmp(&a, &b, sizeof a) == 0; }
 
 /* The 4-wide collapse of b: every wide node reached once from the root, used slots first,
- * unused ones BVH4_EMPTY with count 0 and the empty box; each leaf slot is one of b's leaves
- * (same triangles, box copied bit for bit), each binary leaf in exactly one slot, so every
- * triangle is reached exactly once; an interior slot's box is exactly the union of its child's
- * slot boxes (as b's boxes are of their children's), so it is the binary node's box; a node
- * with a free slot has only leaves (the collapse opens interior children while it can); depth
- * counts the levels and never exceeds b's. */
+ * unused ones BVH4_EMPTY with count 0 and the empty box; each leaf slot is one of b's nodes
+ * (a leaf, or an interior node over at most BVH4_LEAF_MERGE triangles in one run: same
+ * triangles, box copied bit for bit), each binary leaf under exactly one slot, so every
+ * triangle is reached exactly once; no interior slot leads to triangles that could have been
+ * merged; an interior slot's box is exactly the union of its child's slot boxes (as b's boxes
+ * are of their children's), so it is the binary node's box; a node with a free slot has only
+ * leaves (the collapse opens interior children while it can); depth counts the levels and
+ * never exceeds b's. */
 static void check_bvh4(core *c, const char *what, const bvh *b)
 {
     bvh4 w;
@@ -209,13 +211,35 @@ static void check_bvh4(core *c, const char *what, const bvh *b)
     CHECK(same_bits(w.root_lo[0], root->bmin.x) && same_bits(w.root_lo[1], root->bmin.y) &&
           same_bits(w.root_lo[2], root->bmin.z) && same_bits(w.root_hi[0], root->bmax.x) &&
           same_bits(w.root_hi[1], root->bmax.y) && same_bits(w.root_hi[2], root->bmax.z));
-    /* leaf_at[k]: the binary leaf whose triangles start at position k, or 0 (the root is never
-     * a leaf's child, and a root leaf is looked up as node 0 below). */
+    /* Each binary node's triangles: lowest position, count, and whether they are one run
+     * (children follow their parents in b's array, so one backward pass fills them). */
+    uint32_t *sub_first = calloc(b->node_count, sizeof *sub_first), *sub_count = calloc(b->node_count, sizeof *sub_count);
+    uint8_t *sub_run = calloc(b->node_count, 1);
+    if (!sub_first || !sub_count || !sub_run) abort();
+    for (uint32_t i = b->node_count; i-- > 0;) {
+        const vkrt_gpu_node *n = &b->nodes[i];
+        if (n->tri_count) {
+            sub_first[i] = n->left_first, sub_count[i] = n->tri_count, sub_run[i] = 1;
+            continue;
+        }
+        uint32_t l = n->left_first, right = l + 1;
+        CHECK_MSG(l > i, "%s: binary node %u's children come before it", what, i);
+        /* A spatial-split subtree may hold its right child's triangles first. */
+        uint32_t lower = sub_first[l] < sub_first[right] ? l : right, upper = lower == l ? right : l;
+        sub_first[i] = sub_first[lower], sub_count[i] = sub_count[l] + sub_count[right];
+        sub_run[i] = sub_run[l] && sub_run[right] && sub_first[lower] + sub_count[lower] == sub_first[upper];
+    }
+    /* node_at[4 k + c - 1]: the binary node whose c <= 4 triangles start at position k in one
+     * run (0: none; the root is never a slot, and a root leaf is looked up as node 0 below);
+     * leaf_at[k]: the binary leaf whose triangles start at k. */
+    uint32_t *node_at = calloc((size_t)b->tri_count * BVH4_LEAF_MERGE, sizeof *node_at);
     uint32_t *leaf_at = calloc(b->tri_count, sizeof *leaf_at);
     uint8_t *leaf_used = calloc(b->node_count, 1), *node_seen = calloc(w.node_count, 1);
-    if (!leaf_at || !leaf_used || !node_seen) abort();
-    for (uint32_t i = 0; i < b->node_count; i++)
+    if (!node_at || !leaf_at || !leaf_used || !node_seen) abort();
+    for (uint32_t i = 1; i < b->node_count; i++) {
         if (b->nodes[i].tri_count) leaf_at[b->nodes[i].left_first] = i;
+        if (sub_run[i] && sub_count[i] <= BVH4_LEAF_MERGE) node_at[sub_first[i] * BVH4_LEAF_MERGE + sub_count[i] - 1] = i;
+    }
     struct { uint32_t node, level; float lo[3], hi[3]; } stack[BVH4_WIDTH * (VKRT_MAX_BVH_DEPTH + 2)];
     uint32_t sp = 0, levels = 0, errors = 0;
     stack[sp].node = 0, stack[sp].level = 1;
@@ -261,16 +285,30 @@ static void check_bvh4(core *c, const char *what, const bvh *b)
                 sp++;
                 continue;
             }
-            uint32_t first = n->child[k], leaf = first < b->tri_count ? leaf_at[first] : 0;
-            const vkrt_gpu_node *l = &b->nodes[leaf];
-            bool same = l->tri_count == n->count[k] && l->left_first == first && !leaf_used[leaf] &&
-                        same_bits(n->lo[0][k], l->bmin.x) && same_bits(n->lo[1][k], l->bmin.y) &&
-                        same_bits(n->lo[2][k], l->bmin.z) && same_bits(n->hi[0][k], l->bmax.x) &&
-                        same_bits(n->hi[1][k], l->bmax.y) && same_bits(n->hi[2][k], l->bmax.z);
-            CHECK_MSG(same, "%s: leaf slot %u of wide node %u (triangles %u + %u) is no unused binary leaf", what, k, i,
-                      first, n->count[k]);
+            uint32_t first = n->child[k], count = n->count[k], from = 0;
+            if (first < b->tri_count && count <= BVH4_LEAF_MERGE) from = node_at[first * BVH4_LEAF_MERGE + count - 1];
+            else if (first < b->tri_count && b->nodes[leaf_at[first]].tri_count == count) from = leaf_at[first];
+            const vkrt_gpu_node *l = &b->nodes[from];
+            bool same = sub_first[from] == first && sub_count[from] == count && same_bits(n->lo[0][k], l->bmin.x) &&
+                        same_bits(n->lo[1][k], l->bmin.y) && same_bits(n->lo[2][k], l->bmin.z) &&
+                        same_bits(n->hi[0][k], l->bmax.x) && same_bits(n->hi[1][k], l->bmax.y) &&
+                        same_bits(n->hi[2][k], l->bmax.z);
+            /* Every binary leaf under the slot's node, each in this slot alone. */
+            uint32_t under[VKRT_MAX_BVH_DEPTH + 2], depth = 0;
+            under[depth++] = from;
+            while (same && depth) {
+                const vkrt_gpu_node *u = &b->nodes[under[--depth]];
+                if (u->tri_count == 0) {
+                    under[depth++] = u->left_first, under[depth++] = u->left_first + 1;
+                    continue;
+                }
+                uint32_t leaf = (uint32_t)(u - b->nodes);
+                same = !leaf_used[leaf];
+                leaf_used[leaf] = 1;
+            }
+            CHECK_MSG(same, "%s: leaf slot %u of wide node %u (triangles %u + %u) is no binary leaf or small subtree, "
+                      "or shares a leaf with another slot", what, k, i, first, count);
             errors += !same;
-            leaf_used[leaf] = 1;
         }
         CHECK_MSG(used >= (i == 0 && root->tri_count ? 1u : 2u), "%s: wide node %u uses %u slots", what, i, used);
         CHECK_MSG(used == BVH4_WIDTH || !has_interior, "%s: wide node %u has a free slot and an interior child", what, i);
@@ -280,10 +318,43 @@ static void check_bvh4(core *c, const char *what, const bvh *b)
         errors += !encloses;
     }
     for (uint32_t i = 0; i < w.node_count; i++) CHECK_MSG(node_seen[i], "%s: wide node %u is unreachable", what, i);
+    /* The triangles under each wide node (children follow their parents here too): none that
+     * the collapse should have merged into a leaf stands behind an interior slot. */
+    uint32_t *wide_first = calloc(w.node_count, sizeof *wide_first), *wide_count = calloc(w.node_count, sizeof *wide_count);
+    uint8_t *wide_run = calloc(w.node_count, 1);
+    if (!wide_first || !wide_count || !wide_run) abort();
+    for (uint32_t i = w.node_count; errors == 0 && i-- > 0;) {
+        const bvh4_node *n = &w.nodes[i];
+        uint32_t lo = UINT32_MAX, hi = 0, total = 0;
+        bool runs = true;
+        for (uint32_t k = 0; k < BVH4_WIDTH && n->child[k] != BVH4_EMPTY; k++) {
+            uint32_t first = n->child[k], count = n->count[k];
+            if (count == 0) {
+                CHECK_MSG(n->child[k] > i, "%s: wide node %u's child %u comes before it", what, i, n->child[k]);
+                bool mergeable = wide_run[first] && wide_count[first] <= BVH4_LEAF_MERGE;
+                CHECK_MSG(!mergeable, "%s: slot %u of wide node %u leads to %u triangles in one run, not merged", what, k,
+                          i, wide_count[first]);
+                runs &= wide_run[first] != 0;
+                count = wide_count[first];
+                first = wide_first[first];
+            }
+            lo = first < lo ? first : lo;
+            hi = first + count > hi ? first + count : hi;
+            total += count;
+        }
+        wide_first[i] = lo, wide_count[i] = total, wide_run[i] = runs && hi - lo == total;
+    }
     for (uint32_t i = 0; i < b->node_count; i++)
         if (b->nodes[i].tri_count) CHECK_MSG(leaf_used[i], "%s: binary leaf %u is in no wide slot", what, i);
     CHECK_MSG(w.depth == levels && w.depth <= (b->depth ? b->depth : 1), "%s: wide depth %u, %u levels, binary %u",
               what, w.depth, levels, b->depth);
+    free(wide_first);
+    free(wide_count);
+    free(wide_run);
+    free(sub_first);
+    free(sub_count);
+    free(sub_run);
+    free(node_at);
     free(leaf_at);
     free(leaf_used);
     free(node_seen);
@@ -1057,6 +1128,48 @@ static void bvh_sah_parallel_top_levels_report_progress(void)
     test_mesh_free(&c, &m);
 }
 
+/* Small subtrees become leaves only where their triangles are one run of the array: a
+ * hand-made tree whose root's left child holds triangles 0 and 2 (its right child, a leaf,
+ * triangle 1) keeps that child a node over two leaves, where the tree with triangles 0 and 1 on
+ * the left makes it one leaf of two (and the right child stays a leaf of one). check_bvh4 holds
+ * the collapse to its rules on both. */
+static void bvh4_collapse_merges_only_subtrees_in_one_run(void)
+{
+    core c;
+    core_init(&c, NULL, NULL, NULL);
+    for (int run = 0; run < 2; run++) {
+        const uint32_t second = run ? 1u : 2u, other = run ? 2u : 1u;
+        vkrt_gpu_node nodes[5] = {
+            { { 0, 0, 0 }, 1, { 3, 1, 1 }, 0 },               /* root: children 1, 2 */
+            { { 0, 0, 0 }, 3, { 2, 1, 1 }, 0 },               /* left: children 3, 4 */
+            { { 2, 0, 0 }, other, { 3, 1, 1 }, 1 },           /* right: a leaf */
+            { { 0, 0, 0 }, 0, { 1, 1, 1 }, 1 },               /* triangle 0 */
+            { { 1, 0, 0 }, second, { 2, 1, 1 }, 1 },          /* triangle 1 or 2 */
+        };
+        uint32_t order[3] = { 0, 1, 2 };
+        bvh b = { .nodes = nodes, .node_count = 5, .tri_order = order, .tri_count = 3, .depth = 2 };
+        const char *what = run ? "left child over triangles 0 and 1" : "left child over triangles 0 and 2";
+        check_bvh4(&c, what, &b);
+        bvh4 w;
+        CHECK(bvh4_collapse(&c, &b, &w) == VKRT_OK);
+        if (!w.nodes) continue;
+        const bvh4_node *root = &w.nodes[0];
+        if (run) {
+            CHECK_MSG(w.node_count == 1 && root->child[0] == 0 && root->count[0] == 2 && root->child[1] == 2 &&
+                          root->count[1] == 1 && root->child[2] == BVH4_EMPTY,
+                      "%s: %u wide nodes, slots %u+%u %u+%u", what, w.node_count, root->child[0], root->count[0],
+                      root->child[1], root->count[1]);
+        } else {
+            /* The left child is opened into the root's slots: triangles 0, 2, then 1. */
+            CHECK_MSG(w.node_count == 1 && root->child[0] == 0 && root->count[0] == 1 && root->child[1] == 2 &&
+                          root->count[1] == 1 && root->child[2] == 1 && root->count[2] == 1,
+                      "%s: %u wide nodes, slots %u+%u %u+%u %u+%u", what, w.node_count, root->child[0], root->count[0],
+                      root->child[1], root->count[1], root->child[2], root->count[2]);
+        }
+        bvh4_destroy(&c, &w);
+    }
+}
+
 /* The collapse makes one allocation: failing it is VKRT_ERROR_OUT_OF_MEMORY with *out zeroed
  * and nothing leaked; an empty tree is an invalid argument; destroy accepts NULL and zeroes. */
 static void bvh4_collapse_fails_cleanly(void)
@@ -1316,6 +1429,7 @@ int main(void)
     RUN(bvh_sah_parallel_top_levels_report_progress);
     RUN(bvh_sbvh_parallel_is_identical_and_fails_cleanly);
     RUN(bvh_sah_builds_the_same_tree_when_threads_fail_to_start);
+    RUN(bvh4_collapse_merges_only_subtrees_in_one_run);
     RUN(bvh4_collapse_fails_cleanly);
     RUN(wide_pack_quantises_conservatively_and_tightly);
     RUN(bvh_validate_reports_broken_trees);
