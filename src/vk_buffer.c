@@ -260,8 +260,9 @@ vkrt_result vk_commands_begin(vk_context *vk, VkCommandBuffer *out)
     return VKRT_OK;
 }
 
-vkrt_result vk_commands_submit_wait(vk_context *vk, VkCommandBuffer cmd)
+vkrt_result vk_commands_submit(vk_context *vk, VkCommandBuffer cmd, vk_submission *out)
 {
+    *out = (vk_submission){ 0 };
     VkFence fence = VK_NULL_HANDLE;
     VkResult res = vkEndCommandBuffer(cmd);
     const char *call = "vkEndCommandBuffer";
@@ -276,26 +277,42 @@ vkrt_result vk_commands_submit_wait(vk_context *vk, VkCommandBuffer cmd)
         res = inject && !vk->fail_at_wait ? vk->fail_result : vkQueueSubmit(vk->queue, 1, &submit, fence);
         call = "vkQueueSubmit";
     }
-    bool hung = false;
-    if (res == VK_SUCCESS) {
-        /* Bounded, so a device that never answers cannot hang the caller: submissions are sized
-         * to 100 ms, and drivers report a reset GPU as lost within seconds. */
-        res = vkWaitForFences(vk->device, 1, &fence, VK_TRUE, VK_SUBMIT_TIMEOUT_NS);
-        if (res == VK_SUCCESS && inject) res = vk->fail_result;
-        call = "vkWaitForFences";
-        hung = res == VK_TIMEOUT;
+    if (res != VK_SUCCESS) {
+        if (fence) vkDestroyFence(vk->device, fence, NULL);
+        vkFreeCommandBuffers(vk->device, vk->command_pool, 1, &cmd);
+        return vk_fail(vk, res, call);
     }
-    if (hung) {
+    *out = (vk_submission){ .cmd = cmd, .fence = fence, .fail_at_wait = inject };
+    return VKRT_OK;
+}
+
+vkrt_result vk_submission_wait(vk_context *vk, vk_submission *s)
+{
+    if (!s->cmd) return VKRT_OK;
+    /* Bounded, so a device that never answers cannot hang the caller: submissions are sized
+     * to 100 ms, and drivers report a reset GPU as lost within seconds. */
+    VkResult res = vkWaitForFences(vk->device, 1, &s->fence, VK_TRUE, VK_SUBMIT_TIMEOUT_NS);
+    if (res == VK_SUCCESS && s->fail_at_wait) res = vk->fail_result;
+    if (res == VK_TIMEOUT) {
         /* Still pending: its fence and command buffer wait for the context's destruction. */
-        vk->hung_fence = fence;
-        vk->hung_commands = cmd;
+        vk->hung_fence = s->fence;
+        vk->hung_commands = s->cmd;
         vk->lost = true;
+        *s = (vk_submission){ 0 };
         return core_fail(vk->core, VKRT_ERROR_DEVICE_LOST,
                          "a submission did not finish within %.0f s: the device is treated as lost; destroy the "
                          "context, and its scenes, and create a new one",
                          (double)VK_SUBMIT_TIMEOUT_NS * 1e-9);
     }
-    if (fence) vkDestroyFence(vk->device, fence, NULL);
-    vkFreeCommandBuffers(vk->device, vk->command_pool, 1, &cmd);
-    return res == VK_SUCCESS ? VKRT_OK : vk_fail(vk, res, call);
+    vkDestroyFence(vk->device, s->fence, NULL);
+    vkFreeCommandBuffers(vk->device, vk->command_pool, 1, &s->cmd);
+    *s = (vk_submission){ 0 };
+    return res == VK_SUCCESS ? VKRT_OK : vk_fail(vk, res, "vkWaitForFences");
+}
+
+vkrt_result vk_commands_submit_wait(vk_context *vk, VkCommandBuffer cmd)
+{
+    vk_submission s;
+    vkrt_result r = vk_commands_submit(vk, cmd, &s);
+    return r == VKRT_OK ? vk_submission_wait(vk, &s) : r;
 }

@@ -72,4 +72,18 @@ vkrt_result vk_commands_begin(vk_context *vk, VkCommandBuffer *out);
  * and marks the context lost. */
 vkrt_result vk_commands_submit_wait(vk_context *vk, VkCommandBuffer cmd);
 
+/* A submission in flight, for a caller with host work to do meanwhile: its command buffer and
+ * fence (both null: none). */
+typedef struct vk_submission {
+    VkCommandBuffer cmd;
+    VkFence fence;
+    bool fail_at_wait;  /* the fail_submission test knob fired, to fail the wait */
+} vk_submission;
+
+/* vk_commands_submit_wait in two halves: ends and submits cmd (freed on failure), then waits,
+ * which frees it and the fence (none in flight: VKRT_OK at once). Every submission made must
+ * be waited for before the buffers it uses are destroyed. */
+vkrt_result vk_commands_submit(vk_context *vk, VkCommandBuffer cmd, vk_submission *out);
+vkrt_result vk_submission_wait(vk_context *vk, vk_submission *s);
+
 #endif

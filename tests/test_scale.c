@@ -602,6 +602,21 @@ static void progress_cancels_within_one_submission(void)
     double end = core_now_ms();
     CHECK_MSG(r == VKRT_ERROR_CANCELLED, "trace_rays: %s", vkrt_result_string(r));
     CHECK_MSG(end - log.cancelled_ms < 250.0, "trace_rays returned %.1f ms after cancelling", end - log.cancelled_ms);
+    /* Through the BVH the next chunk's rays are read while the device traces one: cancelled as
+     * the second and the third chunk are read (a chunk on the device each time), the call waits
+     * for that chunk before freeing its buffers (the validation layer, checked below, reports a
+     * buffer destroyed in use) and returns within a chunk's time. */
+    for (uint32_t at = 2; at <= 3; at++) {
+        progress_log chunk_log = { .cancel_at = at };
+        vkrt_trace_desc bd = { .progress = log_progress, .progress_user = &chunk_log };
+        r = vkrt_trace_rays(ctx, s, &bd, rays, RAYS, hits);
+        end = core_now_ms();
+        CHECK_MSG(r == VKRT_ERROR_CANCELLED, "trace_rays through the BVH, cancelled at call %u: %s", at,
+                  vkrt_result_string(r));
+        CHECK_EQ_U64(chunk_log.calls, at);
+        CHECK_MSG(end - chunk_log.cancelled_ms < 250.0, "trace_rays through the BVH returned %.1f ms after cancelling",
+                  end - chunk_log.cancelled_ms);
+    }
     free(rays);
     free(hits);
     /* Still usable. */
