@@ -1152,7 +1152,7 @@ typedef struct ray_chunk {
     bool created;           /* o was made (the second chunk's only when the call needs it) */
     bool used;              /* a pass was recorded with o: the image's layout is set */
     uint32_t *sent_index;   /* with the host cull: the call's position of each ray sent */
-    size_t first, read;     /* the call's rays [first, first + read) */
+    size_t first;           /* the call's position of the chunk's first ray read */
     uint32_t sent;          /* rays on the device (0: the chunk holds none) */
     pass_desc desc;
     vkrt_gpu_push push;
@@ -1230,7 +1230,6 @@ static vkrt_result ray_chunk_fill(ray_call *call, ray_chunk *c)
         }
         if (r != VKRT_OK) return r;
         c->first = first;
-        c->read = read;
         c->sent = (uint32_t)n;
         c->push = (vkrt_gpu_push){ .tile_width = (uint32_t)n, .tile_height = 1, .tri_end = call->scene->tri_count,
                                    .tri_total = call->scene->tri_count, .last_chunk = 1 };
