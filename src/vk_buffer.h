@@ -1,4 +1,5 @@
-/* A buffer with its memory, and the one-shot command submission used for copies. */
+/* A buffer with its memory, and the one-shot command submissions: waited for at once (copies),
+ * or left in flight while the host works (vkrt_trace_rays' chunks). */
 #ifndef VKRT_VK_BUFFER_H
 #define VKRT_VK_BUFFER_H
 
