@@ -496,10 +496,14 @@ void finish_buffer_rays_wide()
      * triangle into its hit once: a finished hit holds prim_id, not the triangle. */
     if (unfinished != 0u) return;
     uint slot = gl_WorkGroupID.x * VKRT_TRACE_GROUP_SIZE + gl_LocalInvocationIndex;
-    /* Misses first, every ray of the slot written as one, and the rays that hit listed; then
-     * the hits alone: lavapipe runs an `if`'s body for all eight lanes whatever they need, but
-     * a loop only as often as its busiest lane, and most rays of a view miss (71% of the
-     * primary rays of dragon_200k; 2% fewer instructions a primary-ray trace). */
+    /* The rays that hit listed first, then the hits alone: lavapipe runs an `if`'s body for all
+     * eight lanes whatever they need, but a loop only as often as its busiest lane, and most rays
+     * of a view miss (71% of the primary rays of dragon_200k; 2% fewer instructions a
+     * primary-ray trace). A miss keeps the NO_PRIM the traversal stored in its triangle word:
+     * the host makes it a vkrt_hit miss as it reads the hits back (ray_chunk_collect), where
+     * writing its four words here cost lavapipe four per-lane store loops a ray (0.97-0.98x the
+     * time on primary rays without them). Only the wavefront, whose hits shade.comp reads on the
+     * device, gets them written as misses. */
     uint hit_index[WIDE_RAYS], hit_tri[WIDE_RAYS];
     uint hits = 0u;
     for (uint k = 0u; k < WIDE_RAYS; k++) {
@@ -511,7 +515,7 @@ void finish_buffer_rays_wide()
         hit_index[hits] = index;
         hit_tri[hits] = tri_index;
         hits += tri_index != NO_PRIM ? 1u : 0u;
-        store_wide_hit(index, vkrt_gpu_hit(-1.0, NO_PRIM, 0.0, 0.0));
+        if (RAYGEN == VKRT_GPU_RAYGEN_WAVEFRONT) store_wide_hit(index, vkrt_gpu_hit(-1.0, NO_PRIM, 0.0, 0.0));
     }
     for (uint i = 0u; i < hits; i++) {
         uint index = hit_index[i];
