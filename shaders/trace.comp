@@ -88,8 +88,11 @@ layout(set = 0, binding = VKRT_BINDING_TEXELS, std430) readonly buffer Texels {
 layout(set = 0, binding = VKRT_BINDING_WIDE_NODES, rgba32ui) readonly uniform uimageBuffer wide_nodes;
 layout(set = 0, binding = VKRT_BINDING_TRACE_TRIS, rgba32ui) readonly uniform uimageBuffer trace_tris;
 layout(set = 0, binding = VKRT_BINDING_RAY_TEXELS, rgba32ui) readonly uniform uimageBuffer ray_texels;
-/* A word a texel, so that the traversal can write a hit's triangle word alone. */
+/* A word a texel, so that the finish can write a hit's triangle word alone. */
 layout(set = 0, binding = VKRT_BINDING_HIT_WORDS, r32ui) uniform uimageBuffer hit_words;
+/* The wide ray trace's record of each ray's closest triangle so far, by ray slot (a slot's
+ * VKRT_WIDE_RAYS_PER_LANE words together; see store_slot_tri). */
+layout(set = 0, binding = VKRT_BINDING_SLOT_TRIS, r32ui) uniform uimageBuffer slot_tris;
 /* A split scene's piece addresses (a placeholder otherwise): the nodes, triangles and surfaces
  * bindings then hold only the first piece of each. */
 layout(set = 0, binding = VKRT_BINDING_PIECES, std430) readonly buffer Pieces {
@@ -264,8 +267,8 @@ bool trace_bvh(ray r, uint slot, inout hit best, inout heat_counts heat)
 }
 
 /* The wide traversal's rays come from the ray buffer. Its hits go to the hit buffer in two
- * passes: the traversal records each ray's triangle (store_wide_hit_tri), and once the
- * invocation's rays are all done trace_buffer_rays_wide writes the whole hit. */
+ * passes: the traversal records each ray's triangle (store_slot_tri), and once every ray is
+ * traced the finish (finish_buffer_rays_wide) writes the whole hit. */
 bool load_wide_ray(uint index, out ray r)
 {
     vec4 a = uintBitsToFloat(imageLoad(ray_texels, int(2u * index)));
@@ -290,19 +293,25 @@ vkrt_gpu_tri load_wide_tri(uint tri, out bool last)
                         vec3(0.0), 0u);
 }
 
-/* Ray `index`'s closest triangle so far (NO_PRIM: none), in the triangle word of its hit: a
- * single word, which the traversal stores every step (see trace_wide). */
+/* The closest triangle so far (NO_PRIM: none) of the k-th ray of ray slot `slot`, one word,
+ * which the traversal stores every iteration (see trace_wide). A slot's words lie together,
+ * 128 bytes from a 128-byte boundary, and one lane traces a slot at a time, so no two lanes
+ * store into one cache line. In the hit buffer, by ray, four neighbouring rays shared a line,
+ * and a line whose rays lavapipe's two threads were tracing at once went back and forth
+ * between their cores at every store: 0.87-0.92x the time on primary rays, 0.92-0.93x on
+ * closest-hit AO rays with the words by slot (in-process pairs). */
+void store_slot_tri(uint slot, uint k, hit best)
+{
+    imageStore(slot_tris, int(slot * VKRT_WIDE_RAYS_PER_LANE + k), uvec4(best.prim != NO_PRIM ? best.tri : NO_PRIM));
+}
+
+uint load_slot_tri(uint slot, uint k)
+{
+    return imageLoad(slot_tris, int(slot * VKRT_WIDE_RAYS_PER_LANE + k)).x;
+}
+
+/* The triangle word of a hit (vkrt_gpu_hit.tri). */
 const uint HIT_TRI_WORD = 1u;
-
-void store_wide_hit_tri(uint index, hit best)
-{
-    imageStore(hit_words, int(4u * index + HIT_TRI_WORD), uvec4(best.prim != NO_PRIM ? best.tri : NO_PRIM));
-}
-
-uint load_wide_hit_tri(uint index)
-{
-    return imageLoad(hit_words, int(4u * index + HIT_TRI_WORD)).x;
-}
 
 void store_wide_hit(uint index, vkrt_gpu_hit h)
 {
@@ -499,23 +508,24 @@ void finish_buffer_rays_wide()
     /* The rays that hit listed first, then the hits alone: lavapipe runs an `if`'s body for all
      * eight lanes whatever they need, but a loop only as often as its busiest lane, and most rays
      * of a view miss (71% of the primary rays of dragon_200k; 2% fewer instructions a
-     * primary-ray trace). A miss keeps the NO_PRIM the traversal stored in its triangle word:
-     * the host makes it a vkrt_hit miss as it reads the hits back (ray_chunk_collect), where
-     * writing its four words here cost lavapipe four per-lane store loops a ray (0.97-0.98x the
-     * time on primary rays without them). Only the wavefront, whose hits shade.comp reads on the
-     * device, gets them written as misses. */
+     * primary-ray trace). Every ray's triangle word of its hit is written here, NO_PRIM for a
+     * miss, which the host makes a vkrt_hit miss as it reads the hits back (ray_chunk_collect):
+     * writing a miss's four words cost lavapipe four per-lane store loops a ray (0.97-0.98x the
+     * time on primary rays with one). Only the wavefront, whose hits shade.comp reads on the
+     * device, gets its misses written whole. */
     uint hit_index[WIDE_RAYS], hit_tri[WIDE_RAYS];
     uint hits = 0u;
     for (uint k = 0u; k < WIDE_RAYS; k++) {
         uint index = wide_ray_index(slot, k);
         if (index >= p.tile_width) break;
-        uint tri_index = load_wide_hit_tri(index);
+        uint tri_index = load_slot_tri(slot, k);
         /* Written at the next free entry whether it hits or not, so that the store is the same
          * for every lane; only a hit moves past it. */
         hit_index[hits] = index;
         hit_tri[hits] = tri_index;
         hits += tri_index != NO_PRIM ? 1u : 0u;
         if (RAYGEN == VKRT_GPU_RAYGEN_WAVEFRONT) store_wide_hit(index, vkrt_gpu_hit(-1.0, NO_PRIM, 0.0, 0.0));
+        else imageStore(hit_words, int(4u * index + HIT_TRI_WORD), uvec4(tri_index));
     }
     for (uint i = 0u; i < hits; i++) {
         uint index = hit_index[i];

@@ -15,7 +15,7 @@
  * lane's is done.
  *
  * Included by trace.comp after test_triangle_data, mark_finished, load_wide_ray, load_wide_tri,
- * store_wide_hit_tri and the next_slot counter. */
+ * store_slot_tri and the next_slot counter. */
 #ifndef VKRT_TRAVERSE_WIDE_GLSL
 #define VKRT_TRAVERSE_WIDE_GLSL
 
@@ -251,7 +251,7 @@ const uint WIDE_STEPS = WIDE_REFILL ? 2u : 1u;
 
 /* The closest (or, ANYHIT, any) hit of r, as trace_bvh finds it; with WIDE_RAYS > 1 the hits of
  * ray slot `rays`' rays from its k-th on (r is that one, `valid` whether it may hit anything),
- * then of the slots take_ray_slot gives, each ray's triangle stored by store_wide_hit_tri.
+ * then of the slots take_ray_slot gives, each ray's triangle stored by store_slot_tri.
  * Returns false where the budget stopped it (the state is then in continuation slot `slot`). */
 bool trace_wide(ray r, bool valid, uint slot, uint rays, uint k, inout hit best)
 {
@@ -296,7 +296,7 @@ bool trace_wide(ray r, bool valid, uint slot, uint rays, uint k, inout hit best)
          * each lane's bit of the mask, and a mask that changes from one iteration to the next
          * mispredicts those branches (5% of a primary-ray trace's time). A ray's last store is
          * the one made in the iteration that finds it done, below. */
-        if (WIDE_REFILL) store_wide_hit_tri(wide_ray_index(rays, k), best);
+        if (WIDE_REFILL) store_slot_tri(rays, k, best);
         if (node == NO_NODE && tri == NO_TRI && sp == 0u && held == NO_NODE) {
             if (!WIDE_REFILL) break;
             /* This ray is done: the lane takes its next one (of its slot, or of the next slot

@@ -45,15 +45,17 @@ typedef struct vkrt_float3 { float x, y, z; } vkrt_float3;
 #define VKRT_BINDING_TEXTURES 11       /* vkrt_gpu_texture table (albedo) */
 #define VKRT_BINDING_TEXELS 12         /* every texture's texels: linear RGBA as 4 halves (uvec2) */
 #define VKRT_BINDING_PIECES 13         /* vkrt_gpu_address piece table of a split scene (VKRT_SPEC_SPLIT) */
-/* Bindings 14 .. 17 are storage texel buffers, the wide traversal's arrays (RGBA32UI but for
- * the last): */
+/* Bindings 14 .. 18 are storage texel buffers, the wide traversal's arrays (RGBA32UI but for
+ * the last two): */
 #define VKRT_BINDING_WIDE_NODES 14     /* the wide BVH (VKRT_SPEC_WIDE), read only */
 #define VKRT_BINDING_TRACE_TRIS 15     /* its triangles, whole, read only */
 #define VKRT_BINDING_RAY_TEXELS 16     /* a view of the rays buffer, a ray two texels, read only */
 #define VKRT_BINDING_HIT_WORDS 17      /* an R32UI view of the hits buffer, a hit four texels */
+#define VKRT_BINDING_SLOT_TRIS 18      /* R32UI: each ray slot's closest triangles so far, a slot's
+                                          VKRT_WIDE_RAYS_PER_LANE words together (wide ray traces) */
 #define VKRT_BINDING_TEXEL_FIRST VKRT_BINDING_WIDE_NODES
-#define VKRT_BINDING_TEXEL_COUNT 4     /* the texel buffers, bindings 14 .. 17 */
-#define VKRT_BINDING_COUNT 18          /* bindings 0 .. 17: the image one, the texel buffers,
+#define VKRT_BINDING_TEXEL_COUNT 5     /* the texel buffers, bindings 14 .. 18 */
+#define VKRT_BINDING_COUNT 19          /* bindings 0 .. 18: the image one, the texel buffers,
                                           storage buffers the rest */
 
 /* Descriptor bindings of shade.comp (set 0): the lighting modes' wavefront stages. The ray and

@@ -371,6 +371,8 @@ typedef struct render_objects {
     vk_buffer hits;
     vk_buffer rays;
     VkBufferView hit_words, ray_texels; /* the wide traversal's views: R32UI of hits, RGBA32UI of rays */
+    vk_buffer slot_tris;                /* the wide ray trace's triangles so far, by ray slot */
+    VkBufferView slot_tri_words;        /* its R32UI view */
     vk_buffer resume;
     vk_buffer resume_stack;
     vk_buffer unfinished; /* host-visible: read after every submission */
@@ -389,6 +391,8 @@ static void render_objects_destroy(vk_context *vk, render_objects *o)
     vk_memory_free(vk, o->image_memory, &o->image_allocation);
     if (o->hit_words) vkDestroyBufferView(vk->device, o->hit_words, NULL);
     if (o->ray_texels) vkDestroyBufferView(vk->device, o->ray_texels, NULL);
+    if (o->slot_tri_words) vkDestroyBufferView(vk->device, o->slot_tri_words, NULL);
+    vk_buffer_destroy(vk, &o->slot_tris);
     vk_buffer_destroy(vk, &o->readback);
     vk_buffer_destroy(vk, &o->hits);
     vk_buffer_destroy(vk, &o->rays);
@@ -486,7 +490,7 @@ static vkrt_result create_descriptors(vk_context *vk, const gpu_scene *scene, Vk
                                               .dstBinding = VKRT_BINDING_IMAGE, .descriptorCount = 1,
                                               .descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_IMAGE, .pImageInfo = &image };
     const VkBufferView texels[VKRT_BINDING_TEXEL_COUNT] = { scene->wide_nodes.view, scene->trace_tris.view,
-                                                            o->ray_texels, o->hit_words };
+                                                            o->ray_texels, o->hit_words, o->slot_tri_words };
     for (uint32_t i = 0; i < VKRT_BINDING_TEXEL_COUNT; i++)
         writes[BUFFERS + 1 + i] = (VkWriteDescriptorSet){ .sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET,
                                                           .dstSet = o->set,
@@ -498,6 +502,7 @@ static vkrt_result create_descriptors(vk_context *vk, const gpu_scene *scene, Vk
                        VKRT_BINDING_TRACE_TRIS == VKRT_BINDING_TEXEL_FIRST + 1 &&
                        VKRT_BINDING_RAY_TEXELS == VKRT_BINDING_TEXEL_FIRST + 2 &&
                        VKRT_BINDING_HIT_WORDS == VKRT_BINDING_TEXEL_FIRST + 3 &&
+                       VKRT_BINDING_SLOT_TRIS == VKRT_BINDING_TEXEL_FIRST + 4 &&
                        VKRT_BINDING_TEXEL_FIRST + VKRT_BINDING_TEXEL_COUNT == VKRT_BINDING_COUNT,
                    "the texel buffers' bindings are adjacent, and the last");
     vkUpdateDescriptorSets(vk->device, sizeof writes / sizeof writes[0], writes, 0, NULL);
@@ -507,10 +512,12 @@ static vkrt_result create_descriptors(vk_context *vk, const gpu_scene *scene, Vk
 /* Image mode: a tile_w x tile_h image, hit_count = pixels for naive traversal (else 1), no
  * rays. Ray mode: a 1x1 image (the layout has the binding), hit_count = ray_count rays.
  * resume_slots: continuation slots of budgeted BVH traversal (0: none needed); counter_slots:
- * pixels whose traversal counters are written (0: not counting). */
+ * pixels whose traversal counters are written (0: not counting); slot_words: the words of the
+ * wide ray trace's record by ray slot (ray_slot_words; 0: none needed). */
 static vkrt_result create_render_objects(vk_context *vk, const gpu_scene *scene, VkDescriptorSetLayout layout,
                                          uint32_t tile_w, uint32_t tile_h, uint32_t hit_count, uint32_t ray_count,
-                                         uint32_t resume_slots, uint32_t counter_slots, render_objects *o)
+                                         uint32_t resume_slots, uint32_t counter_slots, uint32_t slot_words,
+                                         render_objects *o)
 {
     memset(o, 0, sizeof *o);
     vkrt_result r = create_image(vk, tile_w, tile_h, o);
@@ -536,6 +543,12 @@ static vkrt_result create_render_objects(vk_context *vk, const gpu_scene *scene,
     if (r == VKRT_OK) r = vk_buffer_view_create(vk, o->hits.buffer, o->hits.size, VK_FORMAT_R32_UINT, &o->hit_words);
     if (r == VKRT_OK)
         r = vk_buffer_view_create(vk, o->rays.buffer, o->rays.size, VK_FORMAT_R32G32B32A32_UINT, &o->ray_texels);
+    if (r == VKRT_OK)
+        r = vk_buffer_create(vk, (VkDeviceSize)(slot_words ? slot_words : 1) * sizeof(uint32_t),
+                             VK_BUFFER_USAGE_STORAGE_TEXEL_BUFFER_BIT, VK_MEMORY_DEVICE, "vkrt ray slot triangles",
+                             &o->slot_tris);
+    if (r == VKRT_OK)
+        r = vk_buffer_view_create(vk, o->slot_tris.buffer, o->slot_tris.size, VK_FORMAT_R32_UINT, &o->slot_tri_words);
     const VkDeviceSize slots = resume_slots ? resume_slots : 1;
     if (r == VKRT_OK)
         r = vk_buffer_create(vk, slots * sizeof(vkrt_gpu_resume), VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, VK_MEMORY_DEVICE,
@@ -586,6 +599,15 @@ static uint32_t ray_groups(const gpu_scene *scene, bool naive, uint32_t rays)
 static uint32_t ray_resume_slots(const gpu_scene *scene, bool naive, uint32_t rays)
 {
     return wide_traversal(scene, naive) ? ray_groups(scene, naive, rays) * VKRT_TRACE_GROUP_SIZE : rays;
+}
+
+/* The words of the wide ray trace's record of each ray's triangle so far (store_slot_tri in
+ * shaders/trace.comp): VKRT_WIDE_RAYS_PER_LANE for each ray slot of a pass over `rays` rays;
+ * none for other traversals. */
+static uint32_t ray_slot_words(const gpu_scene *scene, bool naive, uint32_t rays)
+{
+    return wide_traversal(scene, naive) ? ray_groups(scene, naive, rays) * VKRT_TRACE_GROUP_SIZE * VKRT_WIDE_RAYS_PER_LANE
+                                        : 0;
 }
 
 static uint32_t gpu_mode(vkrt_mode m)
@@ -1033,7 +1055,7 @@ vkrt_result gpu_trace_render(vk_context *vk, const gpu_scene *scene, const gpu_t
     const uint32_t tile_h = height < TILE_SIZE ? height : TILE_SIZE;
     render_objects o;
     r = create_render_objects(vk, scene, pipe.set_layout, tile_w, tile_h, naive ? tile_w * tile_h : 1, 0,
-                              budget ? tile_w * tile_h : 0, variant.counters ? tile_w * tile_h : 0, &o);
+                              budget ? tile_w * tile_h : 0, variant.counters ? tile_w * tile_h : 0, 0, &o);
     gpu_pacer pacer;
     pacer_for(vk, scene, naive, (uint64_t)tile_w * tile_h, &pacer);
     const uint32_t tiles_x = core_div_up(width, tile_w), tiles_y = core_div_up(height, tile_h);
@@ -1189,7 +1211,7 @@ static vkrt_result ray_chunk_create(ray_call *call, ray_chunk *c)
     vk_context *vk = call->vk;
     vkrt_result r = create_render_objects(vk, call->scene, call->pipe.set_layout, 1, 1, call->capacity, call->capacity,
                                           call->budget ? ray_resume_slots(call->scene, call->naive, call->capacity) : 0,
-                                          0, &c->o);
+                                          0, ray_slot_words(call->scene, call->naive, call->capacity), &c->o);
     c->created = true;
     if (r == VKRT_OK && call->cull && !(c->sent_index = core_calloc_array(vk->core, call->capacity, sizeof *c->sent_index)))
         r = VKRT_ERROR_OUT_OF_MEMORY;
@@ -1377,7 +1399,7 @@ vkrt_result gpu_wavefront_tracer_init(vk_context *vk, gpu_wavefront_tracer *t, c
     if (r == VKRT_OK)
         r = create_render_objects(vk, scene, t->pipe.set_layout, 1, 1, capacity, capacity,
                                   t->budget ? ray_resume_slots(scene, naive, capacity) : 0, 0,
-                                  &t->o);
+                                  ray_slot_words(scene, naive, capacity), &t->o);
     return r;
 }
 
