@@ -171,6 +171,19 @@ static inline vkrt_hit *trace_all(vkrt_context *ctx, vkrt_scene *s, const vkrt_t
     if (!hits) abort();
     vkrt_result r = vkrt_trace_rays(ctx, s, d, rays, n, hits);
     CHECK_MSG(r == VKRT_OK, "vkrt_trace_rays: %s", vkrt_context_last_error(ctx));
+    /* Every hit names one of the scene's triangles; one that does not fails here and is made a
+     * miss, so that the callers, which read the triangle a hit names, check on rather than
+     * read past their arrays. */
+    vkrt_scene_stats st;
+    CHECK(vkrt_scene_stats_get(s, &st) == VKRT_OK);
+    size_t unnamed = 0;
+    for (size_t i = 0; i < n; i++) {
+        if (hits[i].prim_id == VKRT_NO_HIT || hits[i].prim_id < st.triangles) continue;
+        unnamed++;
+        hits[i] = (vkrt_hit){ .t = -1.0f, .prim_id = VKRT_NO_HIT };
+    }
+    CHECK_MSG(unnamed == 0, "vkrt_trace_rays: %zu of %zu hits name no triangle of the scene's %llu", unnamed, n,
+              (unsigned long long)st.triangles);
     return hits;
 }
 
