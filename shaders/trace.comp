@@ -295,11 +295,13 @@ vkrt_gpu_tri load_wide_tri(uint tri, out bool last)
 
 /* The closest triangle so far (NO_PRIM: none) of the k-th ray of ray slot `slot`, one word,
  * which the traversal stores every iteration (see trace_wide). A slot's words lie together,
- * 128 bytes from a 128-byte boundary, and one lane traces a slot at a time, so no two lanes
- * store into one cache line. In the hit buffer, by ray, four neighbouring rays shared a line,
- * and a line whose rays lavapipe's two threads were tracing at once went back and forth
- * between their cores at every store: 0.87-0.92x the time on primary rays, 0.92-0.93x on
- * closest-hit AO rays with the words by slot (in-process pairs). */
+ * two whole cache lines (the buffer starts on one), and one lane traces a slot at a time, so
+ * no two lanes store into one line. The words were the hits' triangle words, by ray, when a
+ * slot's rays lay 64 apart (wide_ray_index): four slots' rays shared a line there, and a line
+ * whose rays lavapipe's two threads were tracing at once went back and forth between their
+ * cores at every store; the record by slot traced 0.88-0.94x the time on primary rays and
+ * 0.93-0.95x on AO rays (in-process pairs). With a slot's rays together, its hits' words are
+ * its own too, but four times as many lines: 1.00-1.03x the time of this record. */
 void store_slot_tri(uint slot, uint k, hit best)
 {
     imageStore(slot_tris, int(slot * VKRT_WIDE_RAYS_PER_LANE + k), uvec4(best.prim != NO_PRIM ? best.tri : NO_PRIM));

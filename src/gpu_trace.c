@@ -1294,23 +1294,15 @@ static vkrt_result ray_chunk_finish(ray_call *call, ray_chunk *c)
     return run_passes(call->vk, &c->o, &c->desc, c->push, NULL, launched);
 }
 
-/* Chunk c's hits to their rays' places in out_hits. The wide traversal's finish writes the
- * hits alone: a miss is the NO_HIT triangle word the traversal left, the rest of its hit
- * unwritten, and becomes the miss here. */
+/* Chunk c's hits to their rays' places in out_hits. The wide traversal's finish writes a miss
+ * as its triangle word alone, NO_HIT, the rest of its hit unwritten: it becomes the miss here. */
 static void ray_chunk_collect(ray_call *call, ray_chunk *c)
 {
     const vkrt_hit *sent_hits = call->hits_direct ? c->o.hits.mapped : c->o.readback.mapped;
     const vkrt_hit miss = cpu_trace_miss();
-    if (call->cull) {
-        for (size_t i = 0; i < c->sent; i++) {
-            const vkrt_hit *h = &sent_hits[i];
-            call->out_hits[c->first + c->sent_index[i]] = h->prim_id == VKRT_NO_HIT ? miss : *h;
-        }
-    } else {
-        for (size_t i = 0; i < c->sent; i++) {
-            const vkrt_hit *h = &sent_hits[i];
-            call->out_hits[c->first + i] = h->prim_id == VKRT_NO_HIT ? miss : *h;
-        }
+    for (size_t i = 0; i < c->sent; i++) {
+        const vkrt_hit *h = &sent_hits[i];
+        call->out_hits[c->first + (call->cull ? c->sent_index[i] : i)] = h->prim_id == VKRT_NO_HIT ? miss : *h;
     }
     c->sent = 0;
 }
