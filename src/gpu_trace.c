@@ -844,9 +844,22 @@ static vkrt_result read_unfinished(vk_context *vk, render_objects *o, uint32_t *
     return r;
 }
 
+/* Where a pass over a chunk of rays leaves its hits for the host. */
+typedef enum hits_way {
+    HITS_READBACK,  /* copied into the readback buffer, which the host maps */
+    HITS_MAPPED,    /* in the hit buffer itself, mapped (a CPU device): no copy */
+    HITS_ON_DEVICE  /* nowhere: they stay on the device (the wavefront) */
+} hits_way;
+
+/* The buffer whose mapping holds a pass's hits for the host (hits other than HITS_ON_DEVICE). */
+static vk_buffer *hits_for_host(render_objects *o, hits_way hits)
+{
+    return hits == HITS_MAPPED ? &o->hits : &o->readback;
+}
+
 static void record_rays(VkCommandBuffer cmd, const vk_trace_pipeline *pipe, const render_objects *o,
                         const gpu_scene *scene, vkrt_gpu_push push, bool naive, bool budget, bool first_use,
-                        pass_range range, bool device_only, bool hits_direct);
+                        pass_range range, hits_way hits);
 
 /* What one rectangle of an image or chunk of rays is traced with. */
 typedef struct pass_desc {
@@ -854,8 +867,7 @@ typedef struct pass_desc {
     const gpu_scene *scene;
     bool naive, budget;
     bool rays;         /* a ray chunk, else a rectangle of the image */
-    bool device_only;  /* rays whose hits stay on the device (the wavefront): no readback */
-    bool hits_direct;  /* the host reads the hit buffer itself (mapped): no readback copy */
+    hits_way hits;     /* where a chunk of rays leaves its hits (an image rectangle: unused) */
     bool first;        /* the first rectangle or chunk of the call */
     const char *what;  /* "render" or "trace", for the cancellation message */
     gpu_pacer *pacer;  /* sizes the naive passes and learns from every pass */
@@ -887,7 +899,7 @@ static vkrt_result launch_first_pass(vk_context *vk, render_objects *o, const pa
     VkCommandBuffer cmd;
     vkrt_result r = vk_commands_begin(vk, &cmd);
     if (r != VKRT_OK) return r;
-    record_rays(cmd, d->pipe, o, d->scene, push, false, d->budget, d->first, range, d->device_only, d->hits_direct);
+    record_rays(cmd, d->pipe, o, d->scene, push, false, d->budget, d->first, range, d->hits);
     out->submitted_ms = core_now_ms();
     return vk_commands_submit(vk, cmd, &out->submission);
 }
@@ -911,7 +923,7 @@ static vkrt_result submit_pass(vk_context *vk, render_objects *o, const pass_des
     vkrt_result r = vk_commands_begin(vk, &cmd);
     if (r != VKRT_OK) return r;
     if (d->rays)
-        record_rays(cmd, d->pipe, o, d->scene, push, d->naive, d->budget, d->first, *range, d->device_only, d->hits_direct);
+        record_rays(cmd, d->pipe, o, d->scene, push, d->naive, d->budget, d->first, *range, d->hits);
     else record_tile(cmd, d->pipe, o, d->scene, push, d->naive, d->budget, d->first, *range);
     const double t0 = core_now_ms();
     if ((r = vk_commands_submit_wait(vk, cmd)) != VKRT_OK) return r;
@@ -923,7 +935,7 @@ static vkrt_result submit_pass(vk_context *vk, render_objects *o, const pass_des
  * submitted it: `launched`, else NULL), then more while the loop budget left any traversal
  * unfinished (resume passes) or naive traversal has triangle chunks left, with progress and
  * cancellation between them. Adds the device time to *device_ms (may be NULL); the readback
- * buffer then holds the complete result. */
+ * buffer (a chunk of rays: hits_for_host's) then holds the complete result. */
 static vkrt_result run_passes(vk_context *vk, render_objects *o, const pass_desc *d, vkrt_gpu_push push,
                               double *device_ms, pass_in_flight *launched)
 {
@@ -955,9 +967,9 @@ static vkrt_result run_passes(vk_context *vk, render_objects *o, const pass_desc
         }
         /* Between two submissions; an image rectangle's or ray chunk's caller asks before its
          * next one. */
-        if ((!done || d->device_only) && d->progress && !d->progress(d->progress_user, "trace", d->fraction))
+        if ((!done || d->hits == HITS_ON_DEVICE) && d->progress && !d->progress(d->progress_user, "trace", d->fraction))
             return core_fail(vk->core, VKRT_ERROR_CANCELLED, "%s cancelled by the progress callback", d->what);
-        if (done) return d->device_only ? VKRT_OK : vk_buffer_invalidate(vk, d->hits_direct ? &o->hits : &o->readback);
+        if (done) return d->hits == HITS_ON_DEVICE ? VKRT_OK : vk_buffer_invalidate(vk, hits_for_host(o, d->hits));
         range.again = true;
     }
 }
@@ -1113,11 +1125,11 @@ vkrt_result gpu_trace_render(vk_context *vk, const gpu_scene *scene, const gpu_t
 }
 
 /* Records one pass over a chunk of rays (its first, a resume, or the next naive chunks):
- * dispatch(es) over the rays, then a copy of the hits into the readback buffer (none where the
- * host reads the hit buffer itself, hits_direct, or the hits stay on the device). */
+ * dispatch(es) over the rays, then a copy of the hits into the readback buffer where `hits`
+ * says so. */
 static void record_rays(VkCommandBuffer cmd, const vk_trace_pipeline *pipe, const render_objects *o,
                         const gpu_scene *scene, vkrt_gpu_push push, bool naive, bool budget, bool first_use,
-                        pass_range range, bool device_only, bool hits_direct)
+                        pass_range range, hits_way hits)
 {
     /* The storage image is never written in ray mode, but its descriptor must be in the layout
      * it names. */
@@ -1134,8 +1146,8 @@ static void record_rays(VkCommandBuffer cmd, const vk_trace_pipeline *pipe, cons
                          VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT, 0, 1, &inputs, 0, NULL,
                          0, NULL);
     record_dispatches(cmd, pipe, o, scene, push, naive, budget, range, ray_groups(scene, naive, push.tile_width), 1);
-    if (device_only) return;
-    if (hits_direct) {
+    if (hits == HITS_ON_DEVICE) return;
+    if (hits == HITS_MAPPED) {
         /* The host reads the hits where the shader wrote them, after the fence. */
         record_buffer_barrier(cmd, o->hits.buffer, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_WRITE_BIT,
                               VK_PIPELINE_STAGE_HOST_BIT, VK_ACCESS_HOST_READ_BIT);
@@ -1201,7 +1213,8 @@ typedef struct ray_call {
     const vkrt_ray *rays;
     size_t count, next;     /* the call's rays; the first not yet read into a chunk */
     vkrt_hit *out_hits;
-    bool naive, budget, cull, hits_direct;
+    bool naive, budget, cull;
+    hits_way hits;
     uint32_t capacity, naive_chunks;
     gpu_pacer pacer;
 } ray_call;
@@ -1266,7 +1279,7 @@ static vkrt_result ray_chunk_fill(ray_call *call, ray_chunk *c)
         c->push = (vkrt_gpu_push){ .tile_width = (uint32_t)n, .tile_height = 1, .tri_end = call->scene->tri_count,
                                    .tri_total = call->scene->tri_count, .last_chunk = 1 };
         c->desc = (pass_desc){ .pipe = &call->pipe, .scene = call->scene, .naive = call->naive, .budget = call->budget,
-                               .rays = true, .hits_direct = call->hits_direct, .first = !c->used, .what = "trace",
+                               .rays = true, .hits = call->hits, .first = !c->used, .what = "trace",
                                .pacer = &call->pacer, .progress = call->params->progress,
                                .progress_user = call->params->progress_user, .fraction = fraction };
         return VKRT_OK;
@@ -1285,8 +1298,8 @@ static vkrt_result ray_chunk_launch(ray_call *call, ray_chunk *c)
     return r;
 }
 
-/* Waits for chunk c's first pass and runs what passes are left; its hits are then in its
- * readback buffer. */
+/* Waits for chunk c's first pass and runs what passes are left; its hits are then where
+ * call->hits says. */
 static vkrt_result ray_chunk_finish(ray_call *call, ray_chunk *c)
 {
     pass_in_flight *launched = c->launched ? &c->pass : NULL;
@@ -1298,7 +1311,7 @@ static vkrt_result ray_chunk_finish(ray_call *call, ray_chunk *c)
  * as its triangle word alone, NO_HIT, the rest of its hit unwritten: it becomes the miss here. */
 static void ray_chunk_collect(ray_call *call, ray_chunk *c)
 {
-    const vkrt_hit *sent_hits = call->hits_direct ? c->o.hits.mapped : c->o.readback.mapped;
+    const vkrt_hit *sent_hits = hits_for_host(&c->o, call->hits)->mapped;
     const vkrt_hit miss = cpu_trace_miss();
     for (size_t i = 0; i < c->sent; i++) {
         const vkrt_hit *h = &sent_hits[i];
@@ -1342,7 +1355,7 @@ vkrt_result gpu_trace_rays(vk_context *vk, const gpu_scene *scene, const gpu_tra
     /* Where the rays go straight into mapped memory, so can the hits come back: the host reads
      * the hit buffer itself, without the copy into the readback buffer that lavapipe's threads
      * would make (0.99x the time on primary rays). */
-    call.hits_direct = r == VKRT_OK && call.cull && chunks[0].o.hits.mapped;
+    call.hits = r == VKRT_OK && call.cull && chunks[0].o.hits.mapped ? HITS_MAPPED : HITS_READBACK;
     if (r == VKRT_OK) r = ray_chunk_fill(&call, &chunks[0]);
     if (r == VKRT_OK && chunks[0].sent) r = ray_chunk_launch(&call, &chunks[0]);
     for (int at = 0; r == VKRT_OK && chunks[at].sent; at ^= 1) {
@@ -1421,7 +1434,7 @@ vkrt_result gpu_wavefront_trace(vk_context *vk, gpu_wavefront_tracer *t, const g
     vkrt_gpu_push push = { .tile_width = count, .tile_height = 1, .tri_end = scene->tri_count,
                            .tri_total = scene->tri_count, .last_chunk = 1 };
     const pass_desc pass = { .pipe = &t->pipe, .scene = scene, .naive = t->naive, .budget = t->budget, .rays = true,
-                             .device_only = true, .first = t->first, .what = "render", .pacer = pacer,
+                             .hits = HITS_ON_DEVICE, .first = t->first, .what = "render", .pacer = pacer,
                              .progress = progress->progress, .progress_user = progress->user,
                              .fraction = progress->fraction };
     t->first = false;
