@@ -358,8 +358,8 @@ vkrt_result gpu_scene_upload_surfaces(vk_context *vk, gpu_scene *s, const gpu_su
     return r;
 }
 
-/* Per-call device objects: one tile-sized storage image (1x1 for rays), the readback buffer,
- * the hit buffer (naive traversal's carried hits; the output of rays), the ray buffer, the
+/* Per-call device objects: one tile-sized storage image (1x1 for rays), the readback buffer
+ * (an image's, or the hits' where they come back through a copy), the hit buffer (naive traversal's carried hits; the output of rays), the ray buffer, the
  * continuation state, stacks and unfinished counter of budgeted BVH traversal, a descriptor
  * set and a timestamp query pool. */
 typedef struct render_objects {
@@ -509,8 +509,10 @@ static vkrt_result create_descriptors(vk_context *vk, const gpu_scene *scene, Vk
     return VKRT_OK;
 }
 
-/* Image mode: a tile_w x tile_h image, hit_count = pixels for naive traversal (else 1), no
- * rays. Ray mode: a 1x1 image (the layout has the binding), hit_count = ray_count rays.
+/* Image mode: a tile_w x tile_h image and the readback buffer its pixels are copied into,
+ * hit_count = pixels for naive traversal (else 1), no rays. Ray mode: a 1x1 image (the layout
+ * has the binding), hit_count = ray_count rays, and no readback buffer: the caller adds one
+ * (create_hit_readback) where the host reads the hits through a copy.
  * resume_slots: continuation slots of budgeted BVH traversal (0: none needed); counter_slots:
  * pixels whose traversal counters are written (0: not counting); slot_words: the words of the
  * wide ray trace's record by ray slot (ray_slot_words; 0: none needed). */
@@ -521,11 +523,9 @@ static vkrt_result create_render_objects(vk_context *vk, const gpu_scene *scene,
 {
     memset(o, 0, sizeof *o);
     vkrt_result r = create_image(vk, tile_w, tile_h, o);
-    VkDeviceSize readback = ray_count ? (VkDeviceSize)ray_count * sizeof(vkrt_gpu_hit)
-                                      : (VkDeviceSize)tile_w * tile_h * 4 * sizeof(float);
-    if (r == VKRT_OK)
-        r = vk_buffer_create(vk, readback, VK_BUFFER_USAGE_TRANSFER_DST_BIT, VK_MEMORY_READBACK, "vkrt readback",
-                             &o->readback);
+    if (r == VKRT_OK && !ray_count)
+        r = vk_buffer_create(vk, (VkDeviceSize)tile_w * tile_h * 4 * sizeof(float), VK_BUFFER_USAGE_TRANSFER_DST_BIT,
+                             VK_MEMORY_READBACK, "vkrt readback", &o->readback);
     /* Every binding of the layout gets a buffer; one the variant never reads gets a minimal one. */
     if (r == VKRT_OK)
         r = vk_buffer_create(vk, (VkDeviceSize)(hit_count ? hit_count : 1) * sizeof(vkrt_gpu_hit),
@@ -579,6 +579,14 @@ static vkrt_result create_render_objects(vk_context *vk, const gpu_scene *scene,
 
 /* Whether a scene's traversals go through the wide BVH (all but naive ones; renders with heat
  * or counters keep to the binary BVH as well, whose steps those count). */
+/* The readback buffer of ray mode: ray_count hits, which record_rays copies there from the hit
+ * buffer (HITS_READBACK). */
+static vkrt_result create_hit_readback(vk_context *vk, render_objects *o, uint32_t ray_count)
+{
+    return vk_buffer_create(vk, (VkDeviceSize)ray_count * sizeof(vkrt_gpu_hit), VK_BUFFER_USAGE_TRANSFER_DST_BIT,
+                            VK_MEMORY_READBACK, "vkrt readback", &o->readback);
+}
+
 static bool wide_traversal(const gpu_scene *scene, bool naive)
 {
     return scene->wide && !naive;
@@ -1226,6 +1234,7 @@ static vkrt_result ray_chunk_create(ray_call *call, ray_chunk *c)
                                           call->budget ? ray_resume_slots(call->scene, call->naive, call->capacity) : 0,
                                           0, ray_slot_words(call->scene, call->naive, call->capacity), &c->o);
     c->created = true;
+    if (r == VKRT_OK && call->hits == HITS_READBACK) r = create_hit_readback(vk, &c->o, call->capacity);
     if (r == VKRT_OK && call->cull && !(c->sent_index = core_calloc_array(vk->core, call->capacity, sizeof *c->sent_index)))
         r = VKRT_ERROR_OUT_OF_MEMORY;
     return r;
@@ -1345,6 +1354,9 @@ vkrt_result gpu_trace_rays(vk_context *vk, const gpu_scene *scene, const gpu_tra
      * traversal, the BVH's reference. Decided before the first chunk's buffers are made, by
      * what they will be: mapped on a CPU device, whose memory is the host's. */
     call.cull = !call.naive && vk->properties.deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU;
+    /* Where the hits come back is settled below, by the first chunk's buffers: until then it
+     * gets no readback buffer. */
+    call.hits = HITS_MAPPED;
     r = ray_chunk_create(&call, &chunks[0]);
     if (r == VKRT_OK && call.cull && !chunks[0].o.rays.mapped) {
         /* Not mapped after all: every ray goes to the device. */
@@ -1355,7 +1367,10 @@ vkrt_result gpu_trace_rays(vk_context *vk, const gpu_scene *scene, const gpu_tra
     /* Where the rays go straight into mapped memory, so can the hits come back: the host reads
      * the hit buffer itself, without the copy into the readback buffer that lavapipe's threads
      * would make (0.99x the time on primary rays). */
-    call.hits = r == VKRT_OK && call.cull && chunks[0].o.hits.mapped ? HITS_MAPPED : HITS_READBACK;
+    if (r == VKRT_OK && !(call.cull && chunks[0].o.hits.mapped)) {
+        call.hits = HITS_READBACK;
+        r = create_hit_readback(vk, &chunks[0].o, call.capacity);
+    }
     if (r == VKRT_OK) r = ray_chunk_fill(&call, &chunks[0]);
     if (r == VKRT_OK && chunks[0].sent) r = ray_chunk_launch(&call, &chunks[0]);
     for (int at = 0; r == VKRT_OK && chunks[at].sent; at ^= 1) {
