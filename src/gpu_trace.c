@@ -359,9 +359,10 @@ vkrt_result gpu_scene_upload_surfaces(vk_context *vk, gpu_scene *s, const gpu_su
 }
 
 /* Per-call device objects: one tile-sized storage image (1x1 for rays), the readback buffer
- * (an image's, or the hits' where they come back through a copy), the hit buffer (naive traversal's carried hits; the output of rays), the ray buffer, the
- * continuation state, stacks and unfinished counter of budgeted BVH traversal, a descriptor
- * set and a timestamp query pool. */
+ * (an image's, or the hits' where they come back through a copy), the hit buffer (naive
+ * traversal's carried hits; the output of rays), the ray buffer, the continuation state, stacks
+ * and unfinished counter of budgeted BVH traversal, a descriptor set and a timestamp query
+ * pool. */
 typedef struct render_objects {
     VkImage image;
     VkDeviceMemory image_memory;
@@ -577,8 +578,6 @@ static vkrt_result create_render_objects(vk_context *vk, const gpu_scene *scene,
     return r;
 }
 
-/* Whether a scene's traversals go through the wide BVH (all but naive ones; renders with heat
- * or counters keep to the binary BVH as well, whose steps those count). */
 /* The readback buffer of ray mode: ray_count hits, which record_rays copies there from the hit
  * buffer (HITS_READBACK). */
 static vkrt_result create_hit_readback(vk_context *vk, render_objects *o, uint32_t ray_count)
@@ -587,6 +586,8 @@ static vkrt_result create_hit_readback(vk_context *vk, render_objects *o, uint32
                             VK_MEMORY_READBACK, "vkrt readback", &o->readback);
 }
 
+/* Whether a scene's traversals go through the wide BVH (all but naive ones; renders with heat
+ * or counters keep to the binary BVH as well, whose steps those count). */
 static bool wide_traversal(const gpu_scene *scene, bool naive)
 {
     return scene->wide && !naive;
