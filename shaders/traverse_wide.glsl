@@ -161,8 +161,9 @@ uint take_ray_slot(uint steps)
         sp++;                                                   \
     }
 
-/* The nearest child entered (the slot in sort key keys.x, if `entered`) to the node stage, to
- * the triangle stage or the held leaf where free, or onto the stack. */
+/* The nearest child entered (the slot in sort key keys.x of the visited node's `children`, if
+ * `entered`) to the node stage, to the triangle stage or the held leaf where free, or onto the
+ * stack. */
 #define WIDE_TAKE_NEAREST(keys, entered)                        \
     {                                                           \
         uint nearest = children[keys.x & 3u];                   \
@@ -186,10 +187,11 @@ uint take_ray_slot(uint steps)
  * conditional pushes': farthest lowest). lavapipe stores a private array a lane at a time,
  * branching on each lane's bit of the mask; three stores whose mask is every lane replace
  * three whose masks change from step to step. In-process pairs: 0.92-0.98x the time on any-hit
- * AO rays (seven runs, dragon_200k and the full dragon); on closest-hit rays the same stores
- * took 1.01-1.07x, which keep the conditional pushes. The entries past the pointer are dead,
+ * AO rays (seven runs, dragon_200k and the full dragon); closest-hit rays, for which the same
+ * stores took 1.01-1.07x, keep the conditional pushes. The entries past the pointer are dead,
  * and the arrays have WIDE_PUSH_ROOM entries beyond VKRT_TRAVERSAL_STACK_SIZE for a lane
- * whose stack is full (never, for a BVH the host let through: see WIDE_PUSH_SLOT's caller). */
+ * whose stack is full (never: the host keeps the wide BVH within a third of the stack's
+ * levels). */
 const bool PUSH_FARTHER_ALWAYS = ANYHIT != 0u;
 const uint WIDE_PUSH_ROOM = PUSH_FARTHER_ALWAYS ? 3u : 0u;
 #define WIDE_PUSH_FARTHER_ALWAYS(keys, entered)                                              \
