@@ -510,6 +510,14 @@ static vkrt_result create_descriptors(vk_context *vk, const gpu_scene *scene, Vk
     return VKRT_OK;
 }
 
+/* The host-visible buffer a pass's results are copied into for the host to read: an image
+ * rectangle's pixels, or a chunk's hits. */
+static vkrt_result create_readback(vk_context *vk, VkDeviceSize bytes, render_objects *o)
+{
+    return vk_buffer_create(vk, bytes, VK_BUFFER_USAGE_TRANSFER_DST_BIT, VK_MEMORY_READBACK, "vkrt readback",
+                            &o->readback);
+}
+
 /* Image mode: a tile_w x tile_h image and the readback buffer its pixels are copied into,
  * hit_count = pixels for naive traversal (else 1), no rays. Ray mode: a 1x1 image (the layout
  * has the binding), hit_count = ray_count rays, and no readback buffer: the caller adds one
@@ -524,9 +532,7 @@ static vkrt_result create_render_objects(vk_context *vk, const gpu_scene *scene,
 {
     memset(o, 0, sizeof *o);
     vkrt_result r = create_image(vk, tile_w, tile_h, o);
-    if (r == VKRT_OK && !ray_count)
-        r = vk_buffer_create(vk, (VkDeviceSize)tile_w * tile_h * 4 * sizeof(float), VK_BUFFER_USAGE_TRANSFER_DST_BIT,
-                             VK_MEMORY_READBACK, "vkrt readback", &o->readback);
+    if (r == VKRT_OK && !ray_count) r = create_readback(vk, (VkDeviceSize)tile_w * tile_h * 4 * sizeof(float), o);
     /* Every binding of the layout gets a buffer; one the variant never reads gets a minimal one. */
     if (r == VKRT_OK)
         r = vk_buffer_create(vk, (VkDeviceSize)(hit_count ? hit_count : 1) * sizeof(vkrt_gpu_hit),
@@ -582,8 +588,7 @@ static vkrt_result create_render_objects(vk_context *vk, const gpu_scene *scene,
  * buffer (HITS_READBACK). */
 static vkrt_result create_hit_readback(vk_context *vk, render_objects *o, uint32_t ray_count)
 {
-    return vk_buffer_create(vk, (VkDeviceSize)ray_count * sizeof(vkrt_gpu_hit), VK_BUFFER_USAGE_TRANSFER_DST_BIT,
-                            VK_MEMORY_READBACK, "vkrt readback", &o->readback);
+    return create_readback(vk, (VkDeviceSize)ray_count * sizeof(vkrt_gpu_hit), o);
 }
 
 /* Whether a scene's traversals go through the wide BVH (all but naive ones; renders with heat
