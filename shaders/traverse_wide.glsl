@@ -184,11 +184,13 @@ uint take_ray_slot(uint steps)
 /* How any-hit rays push a visit's farther children: three entries stored by every lane in
  * every step, at the stack's top whether or not the lane visited a node or entered that many
  * children, and the stack pointer moved past those it entered (the stack order is the
- * conditional pushes': farthest lowest). lavapipe stores a private array a lane at a time,
- * branching on each lane's bit of the mask; three stores whose mask is every lane replace
- * three whose masks change from step to step. In-process pairs: 0.92-0.98x the time on any-hit
- * AO rays (seven runs, dragon_200k and the full dragon); closest-hit rays, for which the same
- * stores took 1.01-1.07x, keep the conditional pushes. The entries past the pointer are dead,
+ * conditional pushes': farthest lowest), instead of up to three pushes under masks that change
+ * from step to step. lavapipe stores a private array a lane at a time, each lane's entry
+ * loaded, kept or replaced by a conditional move on its mask bit, and stored back (no branch:
+ * LLVM 15's code read on this host), so a full mask saves no mispredictions; what it does save
+ * was measured, not explained. In-process pairs: 0.92-0.98x the time on any-hit AO rays (seven
+ * runs, dragon_200k and the full dragon); closest-hit rays, for which the same stores took
+ * 1.01-1.07x, keep the conditional pushes. The entries past the pointer are dead,
  * and the arrays have WIDE_PUSH_ROOM entries beyond VKRT_TRAVERSAL_STACK_SIZE for a lane
  * whose stack is full (never: the host keeps the wide BVH within a third of the stack's
  * levels). */
