@@ -190,10 +190,9 @@ uint take_ray_slot(uint steps)
  * LLVM 15's code read on this host), so a full mask saves no mispredictions; what it does save
  * was measured, not explained. In-process pairs: 0.92-0.98x the time on any-hit AO rays (seven
  * runs, dragon_200k and the full dragon); closest-hit rays, for which the same stores took
- * 1.01-1.07x, keep the conditional pushes. The entries past the pointer are dead,
- * and the arrays have WIDE_PUSH_ROOM entries beyond VKRT_TRAVERSAL_STACK_SIZE for a lane
- * whose stack is full (never: the host keeps the wide BVH within a third of the stack's
- * levels). */
+ * 1.01-1.07x, keep the conditional pushes. The entries past the pointer are dead, and the
+ * arrays have WIDE_PUSH_ROOM entries beyond VKRT_TRAVERSAL_STACK_SIZE for a lane whose stack is
+ * full (never: the host keeps the wide BVH within a third of the stack's levels). */
 const bool PUSH_FARTHER_ALWAYS = ANYHIT != 0u;
 const uint WIDE_PUSH_ROOM = PUSH_FARTHER_ALWAYS ? 3u : 0u;
 #define WIDE_PUSH_FARTHER_ALWAYS(keys, entered)                                              \
