@@ -21,26 +21,8 @@
 
 #define NO_TRI 0xFFFFFFFFu
 
-/* One axis of four boxes: the interval of distances where the ray is within the slab, never
- * narrower than intersect_box's slab(), so no box that one enters is culled. Without slab()'s
- * branch for a ray parallel to the slab (inv = +-infinity, lavapipe runs both sides of it):
- * there (lo - o) * inv is -infinity or +infinity by the side o lies on, so the interval is
- * everything with o inside and empty at one infinity with o outside, as slab() has it, but
- * for o on a plane, where 0 * infinity is NaN: the interval is then everything, as in slab()
- * (o on a plane is inside). An empty interval at +infinity may be entered where every other
- * axis's far distance overflows to +infinity: a box visited needlessly, never one culled.
- * 1% fewer instructions a trace. */
-void slab4(float o, float inv, vec4 lo, vec4 hi, out vec4 out_lo, out vec4 out_hi)
-{
-    precise vec4 t0 = (lo - o) * inv;
-    precise vec4 t1 = (hi - o) * inv;
-    bvec4 on_plane = bvec4(uvec4(isnan(t0)) | uvec4(isnan(t1)));
-    /* f_min and f_max of trace_common.glsl, per component. */
-    vec4 t_min = mix(t0, t1, lessThan(t1, t0)), t_max = mix(t0, t1, lessThan(t0, t1));
-    out_lo = mix(t_min, vec4(-T_INFINITY), on_plane);
-    out_hi = mix(t_max, vec4(T_INFINITY), on_plane);
-}
-
+/* f_min and f_max of trace_common.glsl, per component: x where y is NaN (a comparison with NaN
+ * is false), so a NaN in y leaves x as it was. */
 vec4 f_min4(vec4 x, vec4 y) { return mix(x, y, lessThan(y, x)); }
 vec4 f_max4(vec4 x, vec4 y) { return mix(x, y, lessThan(x, y)); }
 
@@ -70,6 +52,26 @@ vec4 dequantise(float origin, float scale, uint bytes)
     return v;
 }
 
+/* One axis of four boxes: the distances where the ray crosses their near and far planes. The
+ * near plane is the low one for a ray going up the axis and the high one for a ray going down
+ * (inv < 0, -0 included: its reciprocal is -infinity), which is the order slab()'s f_min and
+ * f_max find (subtracting o and multiplying by inv keep or reverse the planes' order), so the
+ * distances are intersect_box's own, from one comparison a ray instead of a min and a max a box.
+ * A ray parallel to the axis (inv = +-infinity) gets -infinity or +infinity by the side its
+ * origin lies on, as slab() has it, and NaN (0 * infinity) for an origin on a plane, where
+ * slab() counts it inside: visit_wide_node skips a NaN, which leaves that bound open. The
+ * branch-free handling this replaced (an isnan test and two selects a plane) was 3.5% of the
+ * trace loop's instructions. */
+void planes4(float o, float inv, float origin, float scale, uint lo_bytes, uint hi_bytes, out vec4 t_near,
+             out vec4 t_far)
+{
+    bool down = inv < 0.0;
+    precise vec4 near_t = (dequantise(origin, scale, down ? hi_bytes : lo_bytes) - o) * inv;
+    precise vec4 far_t = (dequantise(origin, scale, down ? lo_bytes : hi_bytes) - o) * inv;
+    t_near = near_t;
+    t_far = far_t;
+}
+
 /* A wide node's four texels: its frame, the quantised planes of its four child boxes, and
  * their references (layout in vkrt_shared.h). */
 struct wide_node {
@@ -95,16 +97,19 @@ uint visit_wide_node(ray r, wide_node n, float best_t, out uvec4 keys)
     uvec4 frame = n.frame, q_a = n.q_a, q_b = n.q_b, children = n.children;
     vec3 origin = uintBitsToFloat(frame.xyz);
     vec3 scale = uintBitsToFloat(((uvec3(frame.w) >> uvec3(0u, 8u, 16u)) & 0xFFu) << 23u);
-    vec4 lo_x = dequantise(origin.x, scale.x, q_a.x), lo_y = dequantise(origin.y, scale.y, q_a.y);
-    vec4 lo_z = dequantise(origin.z, scale.z, q_a.z), hi_x = dequantise(origin.x, scale.x, q_a.w);
-    vec4 hi_y = dequantise(origin.y, scale.y, q_b.x), hi_z = dequantise(origin.z, scale.z, q_b.y);
-    vec4 lx, hx, ly, hy, lz, hz;
-    slab4(r.origin.x, r.inv_dir.x, lo_x, hi_x, lx, hx);
-    slab4(r.origin.y, r.inv_dir.y, lo_y, hi_y, ly, hy);
-    slab4(r.origin.z, r.inv_dir.z, lo_z, hi_z, lz, hz);
-    vec4 tnear = f_max4(f_max4(lx, ly), f_max4(lz, vec4(r.tmin)));
-    precise vec4 tfar = f_min4(f_min4(hx, hy), hz) * VKRT_TFAR_WIDEN_FLOAT;
-    tfar = f_min4(tfar, vec4(prune_bound(best_t)));
+    vec4 nx, fx, ny, fy, nz, fz;
+    planes4(r.origin.x, r.inv_dir.x, origin.x, scale.x, q_a.x, q_a.w, nx, fx);
+    planes4(r.origin.y, r.inv_dir.y, origin.y, scale.y, q_a.y, q_b.x, ny, fy);
+    planes4(r.origin.z, r.inv_dir.z, origin.z, scale.z, q_a.z, q_b.y, nz, fz);
+    /* From tmin, never NaN, so that f_max4 skips a NaN near distance. f_min4 skips a NaN far
+     * distance too, but for fx, which it keeps: tfar is NaN then, and the closest hit's bound
+     * takes its place below, no tighter than the box's. So no box is culled that the ray
+     * enters. A ray parallel to an axis outside a box's slab enters it only where its other far
+     * distances and that bound are +infinity: a box visited needlessly, never one culled. */
+    vec4 tnear = f_max4(f_max4(f_max4(vec4(r.tmin), nx), ny), nz);
+    precise vec4 tfar = f_min4(f_min4(fx, fy), fz) * VKRT_TFAR_WIDEN_FLOAT;
+    vec4 bound = vec4(prune_bound(best_t));
+    tfar = mix(bound, tfar, lessThan(tfar, bound));
     bvec4 entered = bvec4(uvec4(lessThanEqual(tnear, tfar)) & uvec4(notEqual(children, uvec4(VKRT_WIDE_NO_CHILD))));
     uvec4 k = mix(uvec4(0xFFFFFFFFu), (order_key(tnear) & ~3u) | uvec4(0u, 1u, 2u, 3u), entered);
     /* A sorting network of four. */
@@ -368,7 +373,11 @@ bool trace_wide(ray r, bool valid, uint slot, uint rays, uint k, inout hit best)
     }
     /* Saved after the loop, as trace_bvh does (an `if` inside it would cost every iteration). */
     if (BUDGET != 0u && suspended) {
-        states[slot] = vkrt_gpu_resume(1u, node, tri, k, sp, best.t, best.u, best.v, best.tri, best.prim, held,
+        /* The barycentrics are not saved where the finish tests each ray's triangle again for
+         * them (WIDE_REFILL): saving them kept them, and a select of each at every triangle
+         * test, alive through the loop, 6% of its instructions. */
+        float u = WIDE_REFILL ? 0.0 : best.u, v = WIDE_REFILL ? 0.0 : best.v;
+        states[slot] = vkrt_gpu_resume(1u, node, tri, k, sp, best.t, u, v, best.tri, best.prim, held,
                                        floatBitsToUint(held_tnear), rays, 0u, 0u, 0u);
         for (uint i = 0u; i < sp; i++)
             saved_stack[slot * VKRT_TRAVERSAL_STACK_SIZE + i] = vkrt_gpu_stack_entry(stack_ref[i], stack_tnear[i]);

@@ -765,9 +765,10 @@ static void gpu_wide_traversal_matches_the_binary_one(void)
     const size_t n = VKRT_RAY_CHUNK + 777;
     vkrt_ray *rays = random_rays_in_box(n, 99);
     /* Every fourth ray parallel to one or two axes (+-0 components) with its origin on box
-     * planes in them: vertex coordinates, as the binary boxes' bounds and the wide nodes'
-     * frames are. Both traversals' slab tests take their branch for 0 * inf there (slab4 in
-     * the wide one); the hits must be the same. */
+     * planes in them: vertex coordinates, as the binary boxes' bounds are, where its slab test
+     * takes its branch for 0 * inf. The wide nodes' quantised planes seldom fall on them (a
+     * broken handling of their 0 * inf changed no hit here):
+     * gpu_wide_boxes_hold_rays_along_their_planes tests that. The hits must be the same. */
     vkrt_scene_stats st = { 0 };
     float *pos = NULL;
     if (vkrt_scene_stats_get(wide, &st) == VKRT_OK && (pos = malloc(st.triangles * 9 * sizeof *pos)) &&
@@ -854,8 +855,6 @@ static void gpu_camera_rays_hit_what_the_render_shows_on_exported_triangles(void
     check_camera_rays_and_triangles_on(gpu, "gpu");
 }
 
-/* ---- traversals longer than lavapipe's loop limit (65,535 iterations per SIMD group) ---- */
-
 /* A scene of its own positions and indices, in world coordinates. */
 static vkrt_scene *mesh_scene(vkrt_context *ctx, const float *pos, uint32_t vertices, const uint32_t *idx,
                               uint32_t tris, vkrt_bvh_builder builder)
@@ -868,6 +867,97 @@ static vkrt_scene *mesh_scene(vkrt_context *ctx, const float *pos, uint32_t vert
     CHECK_MSG(r == VKRT_OK, "in-memory scene: %s", vkrt_context_last_error(ctx));
     return s;
 }
+
+/* ---- rays along the wide nodes' box planes ---- */
+
+enum { GRID_CUBES = 5, PLANE_RAYS = 96 };
+
+/* GRID_CUBES^3 cubes of side 1/2 at whole coordinates (12 triangles each): every vertex
+ * coordinate is a multiple of 1/2, and so is every child box plane of the wide BVH, whose
+ * quantisation steps are powers of two no coarser than that over this extent (wide_pack.c), so
+ * the planes decode to the faces' coordinates exactly. */
+static void make_cube_grid(float **out_pos, uint32_t **out_idx, uint32_t *out_vertices, uint32_t *out_tris)
+{
+    static const uint32_t faces[12][3] = { { 0, 2, 1 }, { 1, 2, 3 }, { 4, 5, 6 }, { 5, 7, 6 }, { 0, 1, 4 }, { 1, 5, 4 },
+                                           { 2, 6, 3 }, { 3, 6, 7 }, { 0, 4, 2 }, { 2, 4, 6 }, { 1, 3, 5 }, { 3, 7, 5 } };
+    const uint32_t cubes = GRID_CUBES * GRID_CUBES * GRID_CUBES;
+    float *pos = malloc(cubes * 8 * 3 * sizeof *pos);
+    uint32_t *idx = malloc(cubes * 36 * sizeof *idx);
+    if (!pos || !idx) abort();
+    for (uint32_t c = 0; c < cubes; c++) {
+        const uint32_t cell[3] = { c % GRID_CUBES, c / GRID_CUBES % GRID_CUBES, c / (GRID_CUBES * GRID_CUBES) };
+        for (uint32_t v = 0; v < 8; v++)
+            for (int a = 0; a < 3; a++) pos[(c * 8 + v) * 3 + a] = (float)cell[a] + 0.5f * (float)(v >> a & 1u);
+        for (uint32_t f = 0; f < 12; f++)
+            for (int k = 0; k < 3; k++) idx[c * 36 + f * 3 + k] = c * 8 + faces[f][k];
+    }
+    *out_pos = pos;
+    *out_idx = idx;
+    *out_vertices = cubes * 8;
+    *out_tris = cubes * 12;
+}
+
+/* Rays of the cube grid that lie in a face's plane (a +0 or -0 direction component, the origin
+ * on the plane), half of them along a line where two planes meet (two zero components): in the
+ * wide traversal's box test the plane's distance is 0 times an infinite reciprocal, NaN, on
+ * every box bounded by that plane, which must count as the slab holding the whole ray, as
+ * the binary traversal's slab() has it. The rays meet the faces across their path on their
+ * edges and corners, hits the watertight test keeps; a box of those faces culled loses them.
+ * The wide BVH's hits must be the binary one's bit for bit, closest and any-hit. */
+static void gpu_wide_boxes_hold_rays_along_their_planes(void)
+{
+    float *pos;
+    uint32_t *idx, vertices, tris;
+    make_cube_grid(&pos, &idx, &vertices, &tris);
+    vkrt_scene *wide = mesh_scene(gpu, pos, vertices, idx, tris, VKRT_BVH_BUILDER_DEFAULT);
+    gpu->vk->no_wide_traversal = true;
+    vkrt_scene *binary = mesh_scene(gpu, pos, vertices, idx, tris, VKRT_BVH_BUILDER_DEFAULT);
+    gpu->vk->no_wide_traversal = false;
+    free(pos);
+    free(idx);
+    const size_t planes = 2 * GRID_CUBES, n = 3 * planes * PLANE_RAYS;
+    vkrt_ray *rays = calloc(n, sizeof *rays);
+    if (!rays) abort();
+    test_rng rng = { 4711 };
+    size_t k = 0;
+    for (int axis = 0; axis < 3; axis++)
+        for (size_t plane = 0; plane < planes; plane++)
+            for (int i = 0; i < PLANE_RAYS; i++, k++) {
+                /* Across the grid along `across`, from outside it, in the plane of `axis`; a
+                 * second zero component puts it on the plane `along` too. */
+                const int across = (axis + 1 + (i & 1)) % 3, along = 3 - axis - across;
+                const bool edge = (i & 2) != 0;
+                vkrt_ray *r = &rays[k];
+                r->origin[axis] = 0.5f * (float)plane;
+                r->dir[axis] = rng_uniform(&rng) < 0.5 ? 0.0f : -0.0f;
+                const bool from_low = rng_uniform(&rng) < 0.5;
+                r->origin[across] = from_low ? -1.0f : (float)GRID_CUBES + 1.0f;
+                r->dir[across] = (from_low ? 1.0f : -1.0f) * (float)(0.5 + rng_uniform(&rng));
+                r->origin[along] = edge ? 0.5f * (float)((size_t)(rng_uniform(&rng) * (double)planes) % planes)
+                                         : (float)(GRID_CUBES * rng_uniform(&rng));
+                r->dir[along] = edge ? (rng_uniform(&rng) < 0.5 ? 0.0f : -0.0f) : (float)(rng_uniform(&rng) - 0.5);
+            }
+    for (int any = 0; any < 2 && wide && binary; any++) {
+        CHECK_MSG(wide->gpu.wide && !binary->gpu.wide, "wide arrays uploaded: %d and %d", wide->gpu.wide, binary->gpu.wide);
+        const vkrt_trace_desc d = { .any_hit = any };
+        vkrt_hit *w = trace_all(gpu, wide, &d, rays, n), *b = trace_all(gpu, binary, &d, rays, n);
+        size_t differ = 0, hits = 0;
+        for (size_t i = 0; i < n; i++) {
+            hits += b[i].prim_id != VKRT_NO_HIT;
+            differ += any ? (w[i].prim_id == VKRT_NO_HIT) != (b[i].prim_id == VKRT_NO_HIT)
+                          : memcmp(&w[i], &b[i], sizeof w[i]) != 0;
+        }
+        fprintf(stderr, "  any hit %d: %zu of %zu rays along planes differ (%zu hits)\n", any, differ, n, hits);
+        CHECK_MSG(differ == 0 && hits > n / 4, "any hit %d: %zu of %zu rays differ, %zu hits", any, differ, n, hits);
+        free(w);
+        free(b);
+    }
+    free(rays);
+    vkrt_scene_destroy(wide);
+    vkrt_scene_destroy(binary);
+}
+
+/* ---- traversals longer than lavapipe's loop limit (65,535 iterations per SIMD group) ---- */
 
 enum { FAN_TRIS = 100000, STACK_TRIS = 70000, LONG_RAYS = 48 };
 /* Rays down through the stacked leaf: a workgroup's worth and LONG_RAYS more, so that in the
@@ -1441,6 +1531,7 @@ int main(void)
     RUN(gpu_trace_rays_match_cpu_and_naive);
     RUN(gpu_trace_rays_answer_rays_missing_the_scene_box_on_the_host);
     RUN(gpu_wide_traversal_matches_the_binary_one);
+    RUN(gpu_wide_boxes_hold_rays_along_their_planes);
     RUN(gpu_spatial_splits_give_the_hits_of_sah);
     RUN(gpu_watertight_never_misses_shared_edges_and_vertices);
     RUN(gpu_eye_inside_a_closed_mesh_always_hits);
