@@ -48,7 +48,7 @@ void main()
     put(s.tri); put(s.prim); put(s.heat_nodes); put(s.heat_leaves); put(s.heat_tris); put(s.pad0); put(s.pad1);
     put(s.pad2);
     vkrt_gpu_stack_entry e = entries[1];
-    put(e.node); put(e.tnear);
+    put(e.node); put(e.word);
     vkrt_gpu_counters c = counters[1];
     put(c.nodes); put(c.leaves); put(c.tris); put(c.pad0);
     vkrt_gpu_surface f = surfaces[1];

@@ -1,7 +1,8 @@
 /* Traversal of the wide BVH (VKRT_SPEC_WIDE; layouts in vkrt_shared.h), read through texel
- * buffers. One step tests a node's four child boxes from one read of its four texels, visits the
- * nearest child next and pushes the others farthest first, so the stack pops them nearest
- * first; a leaf's triangles follow each other in the triangle array up to the one marked
+ * buffers. One step tests a node's four child boxes from one read of its four texels and visits
+ * the nearest child next; the others become the lane's group, taken nearest first, and the group
+ * they replace goes onto the stack as one entry (a group is a node and the order of its children
+ * left). A leaf's triangles follow each other in the triangle array up to the one marked
  * VKRT_TRACE_TRI_LAST. The answers are trace_bvh's: the box test is intersect_box's
  * conservative one four at a time, so no box the ray enters is culled, and the triangle test and
  * the closest-hit rule (hit_closer) are the same functions, so the visiting order decides
@@ -9,10 +10,11 @@
  * steps, which the CPU reference counts too.
  *
  * The loop has the shape of trace_bvh's: one flat loop, budgeted in the same way
- * (VKRT_SPEC_BUDGET: iterations) with the same continuation state. Each of its steps pops a
- * stack entry, visits a node, or tests one triangle (the first of a leaf together with the
- * step that reached it); an iteration runs WIDE_STEPS of them after taking a new ray where the
- * lane's is done.
+ * (VKRT_SPEC_BUDGET: iterations) with the same continuation state (the group saved on the
+ * stack). Each of its steps takes a group from the stack where the lane has none, visits a node,
+ * tests one triangle (the first of a leaf together with the step that reached it) and hands the
+ * group's nearest child to a free stage; an iteration runs WIDE_STEPS of them after taking a new
+ * ray where the lane's is done.
  *
  * Included by trace.comp after test_triangle_data, mark_finished, load_wide_ray, load_wide_tri,
  * store_slot_tri and the next_slot counter. */
@@ -157,60 +159,44 @@ uint take_ray_slot(uint steps)
     return atomicAdd(next_slot, 1u);
 }
 
-/* Pushes the child of the slot in sort key `key` (visit_wide_node) with its entry distance. A
- * macro, not a function: GLSL passes arrays by copy. */
-#define WIDE_PUSH_SLOT(key)                                     \
+#define NO_KEY 0xFFFFFFFFu
+
+/* A lane's group: the children of one node (group_node) that the ray enters and no stage has
+ * taken yet, as visit_wide_node's sort keys nearest first, NO_KEY past the last. Siblings come
+ * from it, in registers, rather than through the stack: a visit stores at most one entry, the
+ * group it replaces, where the children pushed one by one took up to three. lavapipe stores a
+ * private array a lane at a time (a load, a conditional move on the lane's mask bit and a
+ * store for each of the eight), and every push in the loop's code costs all of that in every
+ * step whether a lane pushes or not (one more push: 1.06-1.08x the time, in-process pairs on
+ * dragon_200k). Against single entries, groups took 0.92-0.94x the time on closest-hit AO rays,
+ * 0.97-0.99x on primary rays and 0.99-1.03x on any-hit AO rays (README, issue 7's
+ * twenty-third session).
+ *
+ * On the stack a group is its node and one word: the front key with its low ten bits cleared
+ * (a distance moved towards -infinity: it prunes conservatively, and stands for every child
+ * of the group, all at least as far), the four slots in order, two bits each, and how many
+ * follow the first (bits 8 and 9). */
+uint group_encode(uvec4 keys)
+{
+    uint more = uint(keys.y != NO_KEY) + uint(keys.z != NO_KEY) + uint(keys.w != NO_KEY);
+    return (keys.x & ~0x3FFu) | (keys.x & 3u) | (keys.y & 3u) << 2 | (keys.z & 3u) << 4 | (keys.w & 3u) << 6 | more << 8;
+}
+
+uvec4 group_decode(uint word)
+{
+    uint front = word & ~0x3FFu, more = (word >> 8) & 3u;
+    return uvec4(front | (word & 3u), more > 0u ? front | ((word >> 2) & 3u) : NO_KEY,
+                 more > 1u ? front | ((word >> 4) & 3u) : NO_KEY, more > 2u ? front | ((word >> 6) & 3u) : NO_KEY);
+}
+
+/* The lane's group onto the stack. A macro, not a function: GLSL passes arrays by copy. Never
+ * full: a visit pushes at most one entry, and the host keeps the wide BVH within the stack's
+ * levels. */
+#define WIDE_PUSH_GROUP()                                       \
     if (sp < VKRT_TRAVERSAL_STACK_SIZE) {                       \
-        stack_ref[sp] = children[(key) & 3u];                   \
-        stack_tnear[sp] = key_float((key) & ~3u);               \
+        stack_node[sp] = group_node;                            \
+        stack_word[sp] = group_encode(group);                   \
         sp++;                                                   \
-    }
-
-/* The nearest child entered (the slot in sort key keys.x of the visited node's `children`, if
- * `entered`) to the node stage, to the triangle stage or the held leaf where free, or onto the
- * stack. */
-#define WIDE_TAKE_NEAREST(keys, entered)                        \
-    {                                                           \
-        uint nearest = children[keys.x & 3u];                   \
-        if (entered > 0u) {                                     \
-            if ((nearest & VKRT_WIDE_LEAF) == 0u) {             \
-                node = nearest;                                 \
-            } else if (tri == NO_TRI) {                         \
-                tri = nearest & ~VKRT_WIDE_LEAF;                \
-            } else if (held == NO_NODE) {                       \
-                held = nearest;                                 \
-                held_tnear = key_float(keys.x & ~3u);           \
-            } else {                                            \
-                WIDE_PUSH_SLOT(keys.x);                         \
-            }                                                   \
-        }                                                       \
-    }
-
-/* How any-hit rays push a visit's farther children: three entries stored by every lane in
- * every step, at the stack's top whether or not the lane visited a node or entered that many
- * children, and the stack pointer moved past those it entered (the stack order is the
- * conditional pushes': farthest lowest), instead of up to three pushes under masks that change
- * from step to step. lavapipe stores a private array a lane at a time, each lane's entry
- * loaded, kept or replaced by a conditional move on its mask bit, and stored back (no branch:
- * LLVM 15's code read on this host), so a full mask saves no mispredictions; what it does save
- * was measured, not explained. In-process pairs: 0.92-0.98x the time on any-hit AO rays (seven
- * runs, dragon_200k and the full dragon); closest-hit rays, for which the same stores took
- * 1.01-1.07x, keep the conditional pushes. The entries past the pointer are dead, and the
- * arrays have WIDE_PUSH_ROOM entries beyond VKRT_TRAVERSAL_STACK_SIZE for a lane whose stack is
- * full (never: the host keeps the wide BVH within a third of the stack's levels). */
-const bool PUSH_FARTHER_ALWAYS = ANYHIT != 0u;
-const uint WIDE_PUSH_ROOM = PUSH_FARTHER_ALWAYS ? 3u : 0u;
-#define WIDE_PUSH_FARTHER_ALWAYS(keys, entered)                                              \
-    {                                                                                        \
-        uint farthest = entered > 3u ? keys.w : (entered > 2u ? keys.z : keys.y);            \
-        uint second = entered > 3u ? keys.z : keys.y;                                        \
-        stack_ref[sp] = children[farthest & 3u];                                             \
-        stack_tnear[sp] = key_float(farthest & ~3u);                                         \
-        stack_ref[sp + 1u] = children[second & 3u];                                          \
-        stack_tnear[sp + 1u] = key_float(second & ~3u);                                      \
-        stack_ref[sp + 2u] = children[keys.y & 3u];                                          \
-        stack_tnear[sp + 2u] = key_float(keys.y & ~3u);                                      \
-        sp = min(sp + (entered > 1u ? entered - 1u : 0u), uint(VKRT_TRAVERSAL_STACK_SIZE));   \
     }
 
 /* Steps a loop iteration runs (1 or 2: WIDE_STEP, written out that many times) where lanes
@@ -226,44 +212,33 @@ const uint WIDE_PUSH_ROOM = PUSH_FARTHER_ALWAYS ? 3u : 0u;
  * whose iterations the budget bounds as lavapipe counts them. */
 const uint WIDE_STEPS = WIDE_REFILL ? 2u : 1u;
 
-/* One step of trace_wide's loop: one stack entry popped, and a triangle tested and a node
- * visited where the lane has them. A macro, not a function, for the stack arrays (as
- * WIDE_PUSH_SLOT); the loop runs it WIDE_STEPS times an iteration. */
+/* One step of trace_wide's loop: a group taken from the stack where the lane has none, a
+ * triangle tested and a node visited where the lane has them, and the group's front handed to
+ * a free stage. A macro, not a function, for the stack arrays (as WIDE_PUSH_GROUP); the loop
+ * runs it WIDE_STEPS times an iteration. */
 #define WIDE_STEP()                                                                              \
     {                                                                                            \
-        /* One stack entry a step: dropped if it starts beyond the closest hit found since (it   \
-         * cannot improve it), else taken by whichever stage is free for it, a leaf waiting on   \
-         * top while another leaf's triangles are being tested. */                               \
+        float bound = prune_bound(best.t);                                                       \
+        /* A leaf held while another leaf's triangles were being tested, dropped if it starts    \
+         * beyond the closest hit found since (it cannot improve it). */                         \
         if (tri == NO_TRI && held != NO_NODE) {                                                  \
-            if (!(held_tnear > prune_bound(best.t))) tri = held & ~VKRT_WIDE_LEAF;               \
+            if (!(held_tnear > bound)) tri = held & ~VKRT_WIDE_LEAF;                             \
             held = NO_NODE;                                                                      \
         }                                                                                        \
-        if (sp > 0u) {                                                                           \
-            uint top = stack_ref[sp - 1u];                                                       \
-            float top_tnear = stack_tnear[sp - 1u];                                              \
-            bool leaf = (top & VKRT_WIDE_LEAF) != 0u;                                            \
-            if (top_tnear > prune_bound(best.t)) {                                               \
-                sp--;                                                                            \
-            } else if (leaf && tri == NO_TRI) {                                                  \
-                tri = top & ~VKRT_WIDE_LEAF;                                                     \
-                sp--;                                                                            \
-            } else if (leaf && held == NO_NODE) {                                                \
-                held = top;                                                                      \
-                held_tnear = top_tnear;                                                          \
-                sp--;                                                                            \
-            } else if (!leaf && node == NO_NODE) {                                               \
-                node = top;                                                                      \
-                sp--;                                                                            \
-            }                                                                                    \
+        if (group.x == NO_KEY && sp > 0u) {                                                      \
+            sp--;                                                                                \
+            group_node = stack_node[sp];                                                         \
+            group = group_decode(stack_word[sp]);                                                \
         }                                                                                        \
         /* Every step runs both stages where it has work for them: lavapipe executes the whole   \
          * loop body for all eight lanes of a SIMD group anyway, so a step that tests a triangle \
-         * and visits a node costs what one doing either costs. Both stages' reads come first    \
-         * (node 0 and triangle 0 for an idle stage), so that the node's wait on memory overlaps \
-         * the triangle's: read inside its stage, after the triangle test, the node was fetched  \
-         * only once the test's hundreds of instructions had passed through the CPU's reorder    \
-         * window. 5-9% less time on any-hit AO rays, the same on others (in-process A/B). */    \
+         * and visits a node costs what one doing either costs. The reads come first (node 0 and \
+         * triangle 0 for an idle stage), so that the node's wait on memory overlaps the         \
+         * triangle's: read inside its stage, after the triangle test, the node was fetched only \
+         * once the test's hundreds of instructions had passed through the CPU's reorder window. \
+         * 5-9% less time on any-hit AO rays, the same on others (in-process A/B). */            \
         wide_node visited = load_wide_node(node == NO_NODE ? 0u : node);                         \
+        uvec4 group_children = imageLoad(wide_nodes, int(group_node * VKRT_WIDE_NODE_TEXELS + 3u)); \
         bool last;                                                                               \
         vkrt_gpu_tri tested = load_wide_tri(tri == NO_TRI ? 0u : tri, last);                     \
         if (tri != NO_TRI) {                                                                     \
@@ -276,30 +251,56 @@ const uint WIDE_STEPS = WIDE_REFILL ? 2u : 1u;
                 tri = NO_TRI;                                                                    \
                 node = NO_NODE;                                                                  \
                 held = NO_NODE;                                                                  \
+                group = uvec4(NO_KEY);                                                           \
             }                                                                                    \
         }                                                                                        \
-        if (PUSH_FARTHER_ALWAYS) {                                                               \
-            /* Every lane, visiting a node or not (lavapipe computes the visit for all eight     \
-             * anyway): a lane without one enters no child and moves no entry onto its stack. */ \
-            uvec4 keys, children = visited.children;                                             \
+        if (node != NO_NODE) {                                                                   \
+            /* The nearest child entered to the node stage, or to the triangle stage or the held \
+             * leaf where free; the rest, with the nearest where no stage took it, become the    \
+             * lane's group, the group it had onto the stack. */                                 \
+            uvec4 keys;                                                                          \
             uint entered = visit_wide_node(r, visited, best.t, keys);                            \
-            if (node == NO_NODE) entered = 0u;                                                   \
-            WIDE_PUSH_FARTHER_ALWAYS(keys, entered);                                             \
-            if (node != NO_NODE) {                                                               \
-                node = NO_NODE;                                                                  \
-                WIDE_TAKE_NEAREST(keys, entered);                                                \
+            uint nearest = visited.children[keys.x & 3u];                                        \
+            bool interior = (nearest & VKRT_WIDE_LEAF) == 0u, taken = entered > 0u;              \
+            if (taken && !interior) {                                                            \
+                if (tri == NO_TRI) {                                                             \
+                    tri = nearest & ~VKRT_WIDE_LEAF;                                             \
+                } else if (held == NO_NODE) {                                                    \
+                    held = nearest;                                                              \
+                    held_tnear = key_float(keys.x & ~3u);                                        \
+                } else {                                                                         \
+                    taken = false;                                                               \
+                }                                                                                \
             }                                                                                    \
-        } else if (node != NO_NODE) {                                                            \
-            uvec4 keys, children = visited.children;                                             \
-            uint entered = visit_wide_node(r, visited, best.t, keys);                            \
-            node = NO_NODE;                                                                      \
-            /* The farther children on the stack, farthest first; the nearest to a free stage,   \
-             * or on top of them. Never full: the host keeps the wide BVH within a third of the  \
-             * stack's levels. */                                                                \
-            if (entered > 3u) WIDE_PUSH_SLOT(keys.w);                                            \
-            if (entered > 2u) WIDE_PUSH_SLOT(keys.z);                                            \
-            if (entered > 1u) WIDE_PUSH_SLOT(keys.y);                                            \
-            WIDE_TAKE_NEAREST(keys, entered);                                                    \
+            uvec4 rest = taken ? uvec4(keys.yzw, NO_KEY) : keys;                                 \
+            if (rest.x != NO_KEY) {                                                              \
+                if (group.x != NO_KEY) WIDE_PUSH_GROUP();                                        \
+                group_node = node;                                                               \
+                group = rest;                                                                    \
+                group_children = visited.children;                                               \
+            }                                                                                    \
+            node = taken && interior ? nearest : NO_NODE;                                        \
+        }                                                                                        \
+        /* The group's front to a free stage, or the whole group dropped where the front starts  \
+         * beyond the closest hit (the rest start no nearer). */                                 \
+        if (group.x != NO_KEY) {                                                                 \
+            uint front = group_children[group.x & 3u];                                           \
+            float front_tnear = key_float(group.x & ~3u);                                        \
+            bool leaf = (front & VKRT_WIDE_LEAF) != 0u, taken = true;                            \
+            if (front_tnear > bound) {                                                           \
+                group = uvec4(NO_KEY);                                                           \
+                taken = false;                                                                   \
+            } else if (!leaf && node == NO_NODE) {                                               \
+                node = front;                                                                    \
+            } else if (leaf && tri == NO_TRI) {                                                  \
+                tri = front & ~VKRT_WIDE_LEAF;                                                   \
+            } else if (leaf && held == NO_NODE) {                                                \
+                held = front;                                                                    \
+                held_tnear = front_tnear;                                                        \
+            } else {                                                                             \
+                taken = false;                                                                   \
+            }                                                                                    \
+            if (taken) group = uvec4(group.yzw, NO_KEY);                                         \
         }                                                                                        \
     }
 
@@ -309,9 +310,11 @@ const uint WIDE_STEPS = WIDE_REFILL ? 2u : 1u;
  * Returns false where the budget stopped it (the state is then in continuation slot `slot`). */
 bool trace_wide(ray r, bool valid, uint slot, uint rays, uint k, inout hit best)
 {
-    uint stack_ref[VKRT_TRAVERSAL_STACK_SIZE + WIDE_PUSH_ROOM];
-    float stack_tnear[VKRT_TRAVERSAL_STACK_SIZE + WIDE_PUSH_ROOM];
+    uint stack_node[VKRT_TRAVERSAL_STACK_SIZE];
+    uint stack_word[VKRT_TRAVERSAL_STACK_SIZE];
     uint sp = 0u, node = valid ? 0u : NO_NODE, tri = NO_TRI;
+    uint group_node = 0u;
+    uvec4 group = uvec4(NO_KEY);
     /* The next leaf, held out of the stack while another leaf's triangles are being tested, so
      * that the nodes under it stay within reach of the node stage. */
     uint held = NO_NODE;
@@ -331,8 +334,8 @@ bool trace_wide(ray r, bool valid, uint slot, uint rays, uint k, inout hit best)
         best = hit(s.t, s.u, s.v, s.tri, s.prim);
         for (uint i = 0u; i < sp; i++) {
             vkrt_gpu_stack_entry e = saved_stack[slot * VKRT_TRAVERSAL_STACK_SIZE + i];
-            stack_ref[i] = e.node;
-            stack_tnear[i] = e.tnear;
+            stack_node[i] = e.node;
+            stack_word[i] = e.word;
         }
     }
     uint steps = 0u;
@@ -351,7 +354,7 @@ bool trace_wide(ray r, bool valid, uint slot, uint rays, uint k, inout hit best)
          * mispredicts those branches (5% of a primary-ray trace's time). A ray's last store is
          * the one made in the iteration that finds it done, below. */
         if (WIDE_REFILL) store_slot_tri(rays, k, best);
-        if (node == NO_NODE && tri == NO_TRI && sp == 0u && held == NO_NODE) {
+        if (node == NO_NODE && tri == NO_TRI && sp == 0u && held == NO_NODE && group.x == NO_KEY) {
             if (!WIDE_REFILL) break;
             /* This ray is done: the lane takes its next one (of its slot, or of the next slot
              * free), and visits its root below. */
@@ -377,10 +380,11 @@ bool trace_wide(ray r, bool valid, uint slot, uint rays, uint k, inout hit best)
          * them (WIDE_REFILL): saving them kept them, and a select of each at every triangle
          * test, alive through the loop, 6% of its instructions. */
         float u = WIDE_REFILL ? 0.0 : best.u, v = WIDE_REFILL ? 0.0 : best.v;
+        if (group.x != NO_KEY) WIDE_PUSH_GROUP();
         states[slot] = vkrt_gpu_resume(1u, node, tri, k, sp, best.t, u, v, best.tri, best.prim, held,
                                        floatBitsToUint(held_tnear), rays, 0u, 0u, 0u);
         for (uint i = 0u; i < sp; i++)
-            saved_stack[slot * VKRT_TRAVERSAL_STACK_SIZE + i] = vkrt_gpu_stack_entry(stack_ref[i], stack_tnear[i]);
+            saved_stack[slot * VKRT_TRAVERSAL_STACK_SIZE + i] = vkrt_gpu_stack_entry(stack_node[i], stack_word[i]);
         atomicAdd(unfinished, 1u);
         return false;
     }

@@ -476,10 +476,13 @@ VKRT_STRUCT(vkrt_gpu_address) {
     VKRT_UINT hi;          /* offset  4 */
 };
 
-/* One saved traversal stack entry, 8 bytes: a pushed node and the distance its box starts. */
+/* One saved traversal stack entry, 8 bytes: a pushed node and a word, the float bits of the
+ * distance its box starts (the binary traversal) or the group's sort word (the wide one:
+ * group_encode in shaders/traverse_wide.glsl). Bits rather than a float: the group's word may
+ * read as a NaN or a denormal, which a device need not copy intact. */
 VKRT_STRUCT(vkrt_gpu_stack_entry) {
     VKRT_UINT node;        /* offset  0 */
-    float tnear;           /* offset  4 */
+    VKRT_UINT word;        /* offset  4 */
 };
 
 /* A ray for arbitrary-ray tracing (vkrt_trace_rays), 32 bytes, identical to vkrt_ray. */
@@ -538,7 +541,7 @@ _Static_assert(offsetof(vkrt_gpu_resume, heat_tris) == 48, "vkrt_gpu_resume.heat
 _Static_assert(sizeof(vkrt_gpu_address) == 8, "vkrt_gpu_address must match std430");
 _Static_assert(offsetof(vkrt_gpu_address, hi) == 4, "vkrt_gpu_address.hi must match std430");
 _Static_assert(sizeof(vkrt_gpu_stack_entry) == 8, "vkrt_gpu_stack_entry must match std430");
-_Static_assert(offsetof(vkrt_gpu_stack_entry, tnear) == 4, "vkrt_gpu_stack_entry.tnear must match std430");
+_Static_assert(offsetof(vkrt_gpu_stack_entry, word) == 4, "vkrt_gpu_stack_entry.word must match std430");
 _Static_assert(VKRT_NAIVE_CHUNK_TRIS <= VKRT_LAVAPIPE_BUDGET, "a naive chunk's loop must fit lavapipe's loop limit");
 _Static_assert(sizeof(vkrt_gpu_counters) == 16, "vkrt_gpu_counters must match std430");
 _Static_assert(sizeof(vkrt_gpu_surface) == 32, "vkrt_gpu_surface must match std430");

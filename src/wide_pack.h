@@ -21,7 +21,9 @@ typedef struct wide_arrays {
 } wide_arrays;
 
 /* Whether the wide traversal can trace this BVH: its stack must hold every entry a descent
- * pushes (three per level at most) and prim_id must leave the VKRT_TRACE_TRI_LAST bit free. */
+ * pushes (one group a level; the bound allows three a level, what the single entries it pushed
+ * before groups needed, so that the same scenes take the wide path) and prim_id must leave the
+ * VKRT_TRACE_TRI_LAST bit free. */
 bool wide_traversal_fits(uint32_t wide_depth, uint32_t tri_count);
 
 /* Fills *out from the binary BVH and its packed triangles (in BVH order), the packing on
