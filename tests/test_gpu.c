@@ -736,6 +736,24 @@ static void gpu_spatial_splits_give_the_hits_of_sah(void)
         for (int b = 0; b < 2; b++) vkrt_scene_destroy(scenes[k][b]);
 }
 
+/* How many of the rays the wide and the binary BVH answer differently: the whole hit for
+ * closest-hit queries, whether it hits for any-hit ones; *out_hits counts the binary's hits. */
+static size_t wide_and_binary_differences(vkrt_scene *wide, vkrt_scene *binary, const vkrt_trace_desc *d,
+                                          const vkrt_ray *rays, size_t n, size_t *out_hits)
+{
+    vkrt_hit *w = trace_all(gpu, wide, d, rays, n), *b = trace_all(gpu, binary, d, rays, n);
+    size_t differ = 0, hits = 0;
+    for (size_t i = 0; i < n; i++) {
+        hits += b[i].prim_id != VKRT_NO_HIT;
+        differ += d->any_hit ? (w[i].prim_id == VKRT_NO_HIT) != (b[i].prim_id == VKRT_NO_HIT)
+                             : memcmp(&w[i], &b[i], sizeof w[i]) != 0;
+    }
+    free(w);
+    free(b);
+    *out_hits = hits;
+    return differ;
+}
+
 /* The wide BVH through texel buffers (the default wherever a scene fits one buffer per array)
  * against the binary BVH it was collapsed from (the test knob keeps a scene to it): the same
  * closest hits bit for bit, ray arrays (VKRT_WIDE_RAYS_PER_LANE rays per invocation, more than
@@ -791,17 +809,9 @@ static void gpu_wide_traversal_matches_the_binary_one(void)
     for (int any = 0; any < 2; any++)
         for (int isect = VKRT_INTERSECTOR_WATERTIGHT; isect <= VKRT_INTERSECTOR_MOLLER_TRUMBORE; isect++) {
             vkrt_trace_desc d = { .intersector = (vkrt_intersector)isect, .any_hit = any };
-            vkrt_hit *w = trace_all(gpu, wide, &d, rays, n), *b = trace_all(gpu, binary, &d, rays, n);
-            size_t differ = 0, hits = 0;
-            for (size_t i = 0; i < n; i++) {
-                hits += b[i].prim_id != VKRT_NO_HIT;
-                differ += any ? (w[i].prim_id == VKRT_NO_HIT) != (b[i].prim_id == VKRT_NO_HIT)
-                              : memcmp(&w[i], &b[i], sizeof w[i]) != 0;
-            }
+            size_t hits, differ = wide_and_binary_differences(wide, binary, &d, rays, n, &hits);
             fprintf(stderr, "  any hit %d, isect %d: %zu of %zu rays differ (%zu hits)\n", any, isect, differ, n, hits);
             CHECK_MSG(differ == 0 && hits > n / 10, "any hit %d, isect %d: %zu of %zu rays differ", any, isect, differ, n);
-            free(w);
-            free(b);
         }
     free(rays);
     /* Rays traced through the wide BVH alone: the scene's device memory is still within issue
@@ -940,17 +950,9 @@ static void gpu_wide_boxes_hold_rays_along_their_planes(void)
     for (int any = 0; any < 2 && wide && binary; any++) {
         CHECK_MSG(wide->gpu.wide && !binary->gpu.wide, "wide arrays uploaded: %d and %d", wide->gpu.wide, binary->gpu.wide);
         const vkrt_trace_desc d = { .any_hit = any };
-        vkrt_hit *w = trace_all(gpu, wide, &d, rays, n), *b = trace_all(gpu, binary, &d, rays, n);
-        size_t differ = 0, hits = 0;
-        for (size_t i = 0; i < n; i++) {
-            hits += b[i].prim_id != VKRT_NO_HIT;
-            differ += any ? (w[i].prim_id == VKRT_NO_HIT) != (b[i].prim_id == VKRT_NO_HIT)
-                          : memcmp(&w[i], &b[i], sizeof w[i]) != 0;
-        }
+        size_t hits, differ = wide_and_binary_differences(wide, binary, &d, rays, n, &hits);
         fprintf(stderr, "  any hit %d: %zu of %zu rays along planes differ (%zu hits)\n", any, differ, n, hits);
         CHECK_MSG(differ == 0 && hits > n / 4, "any hit %d: %zu of %zu rays differ, %zu hits", any, differ, n, hits);
-        free(w);
-        free(b);
     }
     free(rays);
     vkrt_scene_destroy(wide);
