@@ -258,7 +258,8 @@ bool trace_bvh(ray r, uint slot, inout hit best, inout heat_counts heat)
         states[slot] = vkrt_gpu_resume(1u, node, tri_next, tri_end, sp, best.t, best.u, best.v, best.tri, best.prim,
                                        heat.nodes, heat.leaves, heat.tris, 0u, 0u, 0u);
         for (uint i = 0u; i < sp; i++)
-            saved_stack[slot * VKRT_TRAVERSAL_STACK_SIZE + i] = vkrt_gpu_stack_entry(stack_node[i], floatBitsToUint(stack_tnear[i]));
+            saved_stack[slot * VKRT_TRAVERSAL_STACK_SIZE + i] =
+                vkrt_gpu_stack_entry(stack_node[i], floatBitsToUint(stack_tnear[i]));
         atomicAdd(unfinished, 1u);
         return false;
     }
