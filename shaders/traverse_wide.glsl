@@ -22,6 +22,7 @@
 #define VKRT_TRAVERSE_WIDE_GLSL
 
 #define NO_TRI 0xFFFFFFFFu
+#define NO_KEY 0xFFFFFFFFu
 
 /* f_min and f_max of trace_common.glsl, per component: x where y is NaN (a comparison with NaN
  * is false), so a NaN in y leaves x as it was. */
@@ -90,11 +91,11 @@ wide_node load_wide_node(uint node)
                      imageLoad(wide_nodes, base + 3));
 }
 
-/* Tests the four child boxes of wide node n: returns how many the ray enters and, in keys,
- * their entry distances nearest first, each an order_key with the slot in its two low bits
- * (clearing those bits moves a distance towards -infinity, so the distance read back is never
- * beyond the box and prunes conservatively). Missed slots sort last. */
-uint visit_wide_node(ray r, wide_node n, float best_t, out uvec4 keys)
+/* Tests the four child boxes of wide node n: returns the entry distances of those the ray
+ * enters, nearest first, each an order_key with the slot in its two low bits (clearing those
+ * bits moves a distance towards -infinity, so the distance read back is never beyond the box
+ * and prunes conservatively), and NO_KEY for each box missed, last. */
+uvec4 visit_wide_node(ray r, wide_node n, float best_t)
 {
     uvec4 frame = n.frame, q_a = n.q_a, q_b = n.q_b, children = n.children;
     vec3 origin = uintBitsToFloat(frame.xyz);
@@ -113,15 +114,14 @@ uint visit_wide_node(ray r, wide_node n, float best_t, out uvec4 keys)
     vec4 bound = vec4(prune_bound(best_t));
     tfar = mix(bound, tfar, lessThan(tfar, bound));
     bvec4 entered = bvec4(uvec4(lessThanEqual(tnear, tfar)) & uvec4(notEqual(children, uvec4(VKRT_WIDE_NO_CHILD))));
-    uvec4 k = mix(uvec4(0xFFFFFFFFu), (order_key(tnear) & ~3u) | uvec4(0u, 1u, 2u, 3u), entered);
+    uvec4 k = mix(uvec4(NO_KEY), (order_key(tnear) & ~3u) | uvec4(0u, 1u, 2u, 3u), entered);
     /* A sorting network of four. */
     sort2(k.x, k.y);
     sort2(k.z, k.w);
     sort2(k.x, k.z);
     sort2(k.y, k.w);
     sort2(k.y, k.z);
-    keys = k;
-    return uint(entered.x) + uint(entered.y) + uint(entered.z) + uint(entered.w);
+    return k;
 }
 
 /* Rays one invocation traces (VKRT_WIDE_RAYS_PER_LANE): a lane whose ray is done takes its
@@ -158,8 +158,6 @@ uint take_ray_slot(uint steps)
     if (BUDGET != 0u && (p.resume != 0u || steps >= BUDGET / 2u)) return NO_SLOT;
     return atomicAdd(next_slot, 1u);
 }
-
-#define NO_KEY 0xFFFFFFFFu
 
 /* A lane's group: the children of one node (group_node) that the ray enters and no stage has
  * taken yet, as visit_wide_node's sort keys nearest first, NO_KEY past the last. Siblings come
@@ -260,10 +258,9 @@ const uint WIDE_STEPS = WIDE_REFILL ? 2u : 1u;
             /* The nearest child entered to the node stage, or to the triangle stage or the held \
              * leaf where free; the rest, with the nearest where no stage took it, become the    \
              * lane's group, the group it had onto the stack. */                                 \
-            uvec4 keys;                                                                          \
-            uint entered = visit_wide_node(r, visited, best.t, keys);                            \
+            uvec4 keys = visit_wide_node(r, visited, best.t);                                    \
             uint nearest = visited.children[keys.x & 3u];                                        \
-            bool interior = (nearest & VKRT_WIDE_LEAF) == 0u, taken = entered > 0u;              \
+            bool interior = (nearest & VKRT_WIDE_LEAF) == 0u, taken = keys.x != NO_KEY;          \
             if (taken && !interior) {                                                            \
                 if (tri == NO_TRI) {                                                             \
                     tri = nearest & ~VKRT_WIDE_LEAF;                                             \

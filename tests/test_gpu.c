@@ -947,8 +947,9 @@ static void gpu_wide_boxes_hold_rays_along_their_planes(void)
                                          : (float)(GRID_CUBES * rng_uniform(&rng));
                 r->dir[along] = edge ? (rng_uniform(&rng) < 0.5 ? 0.0f : -0.0f) : (float)(rng_uniform(&rng) - 0.5);
             }
-    for (int any = 0; any < 2 && wide && binary; any++) {
+    if (wide && binary)
         CHECK_MSG(wide->gpu.wide && !binary->gpu.wide, "wide arrays uploaded: %d and %d", wide->gpu.wide, binary->gpu.wide);
+    for (int any = 0; any < 2 && wide && binary; any++) {
         const vkrt_trace_desc d = { .any_hit = any };
         size_t hits, differ = wide_and_binary_differences(wide, binary, &d, rays, n, &hits);
         fprintf(stderr, "  any hit %d: %zu of %zu rays along planes differ (%zu hits)\n", any, differ, n, hits);
