@@ -189,8 +189,11 @@ uvec4 group_decode(uint word)
 }
 
 /* The lane's group onto the stack. A macro, not a function: GLSL passes arrays by copy. Never
- * full: a visit pushes at most one entry, and the host keeps the wide BVH within the stack's
- * levels. */
+ * full: the group a visit of node N pushes is always a proper ancestor's of N, and each entry
+ * under it a proper ancestor's of the one above, one a level (N descends from the group's node;
+ * a pop replaces an emptied group by an ancestor's). So a lane holds fewer entries than the
+ * wide BVH has levels, one more once a suspension pushes its group, and the host keeps the
+ * levels within the stack (wide_traversal_fits). */
 #define WIDE_PUSH_GROUP()                                       \
     if (sp < VKRT_TRAVERSAL_STACK_SIZE) {                       \
         stack_node[sp] = group_node;                            \

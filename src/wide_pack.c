@@ -14,7 +14,7 @@ static uint32_t float_bits(float f)
 
 bool wide_traversal_fits(uint32_t wide_depth, uint32_t tri_count)
 {
-    return (uint64_t)3 * wide_depth <= VKRT_TRAVERSAL_STACK_SIZE && tri_count < VKRT_TRACE_TRI_LAST;
+    return wide_depth <= VKRT_TRAVERSAL_STACK_SIZE && tri_count < VKRT_TRACE_TRI_LAST;
 }
 
 /* The decoded value of quantised coordinate q, as visit_wide_node computes it: float

@@ -21,9 +21,13 @@ typedef struct wide_arrays {
 } wide_arrays;
 
 /* Whether the wide traversal can trace this BVH: its stack must hold every entry a descent
- * pushes (one group a level; the bound allows three a level, what the single entries it pushed
- * before groups needed, so that the same scenes take the wide path) and prim_id must leave the
- * VKRT_TRACE_TRI_LAST bit free. */
+ * pushes and prim_id must leave the VKRT_TRACE_TRI_LAST bit free. The stack holds groups (one
+ * entry each, shaders/traverse_wide.glsl), each of a proper ancestor of the lane's own group's
+ * node and no two of one level: fewer entries than there are levels, plus the group a
+ * suspension pushes, so `wide_depth` levels need `wide_depth` entries. Every BVH within
+ * VKRT_MAX_BVH_DEPTH fits (a wide level spans at least one binary level); the single entries
+ * pushed before groups needed three a level, which sent wide depths above 21 to the binary
+ * traversal. */
 bool wide_traversal_fits(uint32_t wide_depth, uint32_t tri_count);
 
 /* Fills *out from the binary BVH and its packed triangles (in BVH order), the packing on

@@ -960,6 +960,103 @@ static void gpu_wide_boxes_hold_rays_along_their_planes(void)
     vkrt_scene_destroy(binary);
 }
 
+/* ---- a wide BVH of more levels than a third of the stack ---- */
+
+enum { CHAIN_TRIS = 70, CHAIN_UP_FROM = 61, CHAIN_RAYS = 64, CHAIN_RANDOM_RAYS = 4096 };
+
+/* CHAIN_TRIS triangles in the planes x = 0.4^i, all with their centroid on the x axis, so the
+ * midpoint builder splits the first off at each level (below the midpoint of 0.4^i and about 0:
+ * the rest): a chain as deep as VKRT_MAX_BVH_DEPTH, its last leaf the triangles left at that
+ * depth, which the 4-wide collapse makes 22 levels (three binary levels a wide node). In the
+ * (y, z) plane,
+ * triangle i points down (vertices (-1, 1), (1, 1), (0, -2)) from CHAIN_UP_FROM on and up
+ * ((-1, -1), (1, -1), (0, 2)) before: both boxes hold (0.6, +-0.9), which only the up ones
+ * cover at z = -0.9 and only the down ones at z = 0.9. */
+static void make_chain(float **out_pos, uint32_t **out_idx)
+{
+    float *pos = malloc(CHAIN_TRIS * 9 * sizeof *pos);
+    uint32_t *idx = malloc(CHAIN_TRIS * 3 * sizeof *idx);
+    if (!pos || !idx) abort();
+    for (uint32_t i = 0; i < CHAIN_TRIS; i++) {
+        const float x = (float)pow(0.4, (double)i), up = i < CHAIN_UP_FROM ? 1.0f : -1.0f;
+        const float v[9] = { x, -1, -up, x, 1, -up, x, 0, 2 * up };
+        memcpy(pos + i * 9, v, sizeof v);
+        for (uint32_t k = 0; k < 3; k++) idx[i * 3 + k] = i * 3 + k;
+    }
+    *out_pos = pos;
+    *out_idx = idx;
+}
+
+/* The wide traversal keeps one stack entry a level (a group of a node's children), so a wide BVH
+ * of more than 21 levels (the bound of three entries a level, which sent such scenes to the
+ * binary traversal) takes it too. Rays along +x from just before the chain's smallest plane
+ * enter every node nearest child first: the chain's deeper part, leaving each node's leaves in a
+ * group on the stack. Those at z = -0.9 hit only the up triangles, the nearest of which
+ * (CHAIN_UP_FROM - 1) waits in the group pushed at the 21st level: a stack that lost its deepest
+ * entries would answer with an earlier one. Those at z = 0.9 hit the last triangle first. With
+ * rays from every side, closest and any-hit queries must give the binary traversal's hits bit
+ * for bit. */
+static void gpu_deep_wide_bvhs_take_the_wide_traversal(void)
+{
+    float *pos;
+    uint32_t *idx;
+    make_chain(&pos, &idx);
+    vkrt_scene *wide = mesh_scene(gpu, pos, CHAIN_TRIS * 3, idx, CHAIN_TRIS, VKRT_BVH_BUILDER_MIDPOINT);
+    gpu->vk->no_wide_traversal = true;
+    vkrt_scene *binary = mesh_scene(gpu, pos, CHAIN_TRIS * 3, idx, CHAIN_TRIS, VKRT_BVH_BUILDER_MIDPOINT);
+    gpu->vk->no_wide_traversal = false;
+    free(pos);
+    free(idx);
+    if (!wide || !binary) goto done;
+    bvh4 collapsed;
+    CHECK(bvh4_collapse(&gpu->core, &wide->bvh, &collapsed) == VKRT_OK);
+    fprintf(stderr, "  chain: binary depth %u, %u wide levels\n", wide->bvh.depth, collapsed.depth);
+    CHECK_MSG(wide->bvh.depth == VKRT_MAX_BVH_DEPTH && collapsed.depth > VKRT_TRAVERSAL_STACK_SIZE / 3,
+              "binary depth %u, %u wide levels", wide->bvh.depth, collapsed.depth);
+    bvh4_destroy(&gpu->core, &collapsed);
+    CHECK_MSG(wide->gpu.wide && !binary->gpu.wide, "wide arrays uploaded: %d and %d", wide->gpu.wide, binary->gpu.wide);
+    const size_t n = 2 * CHAIN_RAYS + CHAIN_RANDOM_RAYS;
+    vkrt_ray *rays = calloc(n, sizeof *rays);
+    if (!rays) abort();
+    test_rng rng = { 271828 };
+    for (size_t i = 0; i < n; i++) {
+        vkrt_ray *r = &rays[i];
+        if (i < 2 * CHAIN_RAYS) {
+            const float z = i < CHAIN_RAYS ? -0.9f : 0.9f;
+            *r = (vkrt_ray){ .origin = { -ldexpf(1.0f, -110), 0.6f + 0.2f * (float)rng_uniform(&rng),
+                                         z + 0.05f * (float)(rng_uniform(&rng) - 0.5) },
+                             .dir = { 1.0f, 0.001f * (float)(rng_uniform(&rng) - 0.5),
+                                      0.001f * (float)(rng_uniform(&rng) - 0.5) } };
+            continue;
+        }
+        /* From a sphere of radius 3 round the chain towards a point in its box. */
+        double d[3];
+        rng_unit_vector(&rng, d);
+        const double target[3] = { rng_uniform(&rng), 2 * rng_uniform(&rng) - 1, 4 * rng_uniform(&rng) - 2 };
+        for (int a = 0; a < 3; a++) {
+            r->origin[a] = (float)(3 * d[a]);
+            r->dir[a] = (float)(target[a] - 3 * d[a]);
+        }
+    }
+    for (int any = 0; any < 2; any++) {
+        const vkrt_trace_desc d = { .any_hit = any };
+        size_t hits, differ = wide_and_binary_differences(wide, binary, &d, rays, n, &hits);
+        fprintf(stderr, "  any hit %d: %zu of %zu rays differ (%zu hits)\n", any, differ, n, hits);
+        CHECK_MSG(differ == 0 && hits > n / 4, "any hit %d: %zu of %zu rays differ, %zu hits", any, differ, n, hits);
+    }
+    vkrt_hit *h = trace_all(gpu, wide, &(vkrt_trace_desc){ 0 }, rays, 2 * CHAIN_RAYS);
+    size_t wrong = 0;
+    for (size_t i = 0; i < 2 * CHAIN_RAYS; i++)
+        wrong += h[i].prim_id != (i < CHAIN_RAYS ? CHAIN_UP_FROM - 1u : CHAIN_TRIS - 1u);
+    CHECK_MSG(wrong == 0, "%zu of %d rays along the chain hit another triangle than its nearest (ray 0: %u)", wrong,
+              2 * CHAIN_RAYS, h[0].prim_id);
+    free(h);
+    free(rays);
+done:
+    vkrt_scene_destroy(wide);
+    vkrt_scene_destroy(binary);
+}
+
 /* ---- traversals longer than lavapipe's loop limit (65,535 iterations per SIMD group) ---- */
 
 enum { FAN_TRIS = 100000, STACK_TRIS = 70000, LONG_RAYS = 48 };
@@ -1535,6 +1632,7 @@ int main(void)
     RUN(gpu_trace_rays_answer_rays_missing_the_scene_box_on_the_host);
     RUN(gpu_wide_traversal_matches_the_binary_one);
     RUN(gpu_wide_boxes_hold_rays_along_their_planes);
+    RUN(gpu_deep_wide_bvhs_take_the_wide_traversal);
     RUN(gpu_spatial_splits_give_the_hits_of_sah);
     RUN(gpu_watertight_never_misses_shared_edges_and_vertices);
     RUN(gpu_eye_inside_a_closed_mesh_always_hits);
