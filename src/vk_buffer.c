@@ -22,13 +22,38 @@ static bool countdown_fires(uint32_t *countdown)
     return --*countdown == 0;
 }
 
-vkrt_result vk_memory_allocate(vk_context *vk, const VkMemoryAllocateInfo *info, const char *label,
-                               VkDeviceMemory *out)
+/* Frees the recycled blocks, oldest first, until at most `keep_bytes` are kept. */
+static void recycled_trim(vk_context *vk, VkDeviceSize keep_bytes)
+{
+    uint32_t dropped = 0;
+    while (dropped < vk->recycled_count && vk->recycled_bytes > keep_bytes) {
+        struct vk_recycled_block *b = &vk->recycled[dropped++];
+        if (b->mapped) vkUnmapMemory(vk->device, b->memory);
+        vkFreeMemory(vk->device, b->memory, NULL);
+        vk->recycled_bytes -= b->size;
+    }
+    vk->recycled_count -= dropped;
+    memmove(vk->recycled, vk->recycled + dropped, vk->recycled_count * sizeof vk->recycled[0]);
+}
+
+void vk_memory_recycled_release(vk_context *vk)
+{
+    recycled_trim(vk, 0);
+}
+
+/* The checks and the allocation of vk_memory_allocate, the fail_allocation hook left to the
+ * caller. Recycled blocks give way first where the heap or the budget, counting them, would
+ * refuse the request, and where the driver does. */
+static vkrt_result allocate_checked(vk_context *vk, const VkMemoryAllocateInfo *info, const char *label, bool fail,
+                                    VkDeviceMemory *out)
 {
     *out = VK_NULL_HANDLE;
     const VkDeviceSize size = info->allocationSize;
     const uint32_t heap = vk->memory.memoryTypes[info->memoryTypeIndex].heapIndex;
     const VkDeviceSize heap_size = vk->memory.memoryHeaps[heap].size;
+    if (vk->heap_in_use[heap] + vk->recycled_bytes + size > heap_size ||
+        (vk->memory_budget && vk->memory_in_use + vk->recycled_bytes + size > vk->memory_budget))
+        vk_memory_recycled_release(vk);
     /* A request the heap cannot hold on top of what this context holds already is refused
      * before the driver is asked: some drivers (lavapipe among them) would overcommit. */
     if (vk->heap_in_use[heap] + size > heap_size)
@@ -43,8 +68,11 @@ vkrt_result vk_memory_allocate(vk_context *vk, const VkMemoryAllocateInfo *info,
                          "%llu-byte budget",
                          label, (unsigned long long)size, (unsigned long long)vk->memory_in_use,
                          (unsigned long long)vk->memory_budget);
-    VkResult res = countdown_fires(&vk->fail_allocation) ? VK_ERROR_OUT_OF_DEVICE_MEMORY
-                                                          : vkAllocateMemory(vk->device, info, NULL, out);
+    VkResult res = fail ? VK_ERROR_OUT_OF_DEVICE_MEMORY : vkAllocateMemory(vk->device, info, NULL, out);
+    if (!fail && (res == VK_ERROR_OUT_OF_DEVICE_MEMORY || res == VK_ERROR_OUT_OF_HOST_MEMORY) && vk->recycled_count) {
+        vk_memory_recycled_release(vk);
+        res = vkAllocateMemory(vk->device, info, NULL, out);
+    }
     if (res != VK_SUCCESS) {
         *out = VK_NULL_HANDLE;
         const bool host = res == VK_ERROR_OUT_OF_HOST_MEMORY;
@@ -59,12 +87,61 @@ vkrt_result vk_memory_allocate(vk_context *vk, const VkMemoryAllocateInfo *info,
     return VKRT_OK;
 }
 
+vkrt_result vk_memory_allocate(vk_context *vk, const VkMemoryAllocateInfo *info, const char *label,
+                               VkDeviceMemory *out)
+{
+    return allocate_checked(vk, info, label, countdown_fires(&vk->fail_allocation), out);
+}
+
 void vk_memory_free(vk_context *vk, VkDeviceMemory memory, const VkMemoryAllocateInfo *info)
 {
     if (!memory) return;
     vkFreeMemory(vk->device, memory, NULL);
     vk->memory_in_use -= info->allocationSize;
     vk->heap_in_use[vk->memory.memoryTypes[info->memoryTypeIndex].heapIndex] -= info->allocationSize;
+}
+
+/* A recycled block for `size` bytes of memory type `type`, at most an eighth larger (a call's
+ * working buffers come back at the sizes they had, and a scene's buffers should not hold, and
+ * report, memory they do not need), taken out of the pool as live memory; -1: none. Never past
+ * memory_budget's count of live memory. */
+static int recycled_take(vk_context *vk, VkDeviceSize size, uint32_t type, bool address)
+{
+    for (uint32_t i = vk->recycled_count; i-- > 0;) {
+        const struct vk_recycled_block b = vk->recycled[i];
+        if (b.type != type || b.address != address || b.size < size || b.size - size > size / 8) continue;
+        if (vk->memory_budget && vk->memory_in_use + b.size > vk->memory_budget) continue;
+        vk->recycled_count--;
+        memmove(vk->recycled + i, vk->recycled + i + 1, (vk->recycled_count - i) * sizeof vk->recycled[0]);
+        vk->recycled[vk->recycled_count] = b; /* parked at the end for the caller to read */
+        vk->recycled_bytes -= b.size;
+        vk->memory_in_use += b.size;
+        vk->heap_in_use[vk->memory.memoryTypes[type].heapIndex] += b.size;
+        return (int)vk->recycled_count;
+    }
+    return -1;
+}
+
+/* Keeps a destroyed buffer's memory (still mapped) for a later buffer, or frees it where it
+ * is larger than the pool; the oldest blocks go to make room. */
+static void recycle(vk_context *vk, VkDeviceMemory memory, VkDeviceSize size, uint32_t type, bool address,
+                    void *mapped)
+{
+    vk->memory_in_use -= size;
+    vk->heap_in_use[vk->memory.memoryTypes[type].heapIndex] -= size;
+    if (size > VK_RECYCLED_BYTES || vk->lost) {
+        if (mapped) vkUnmapMemory(vk->device, memory);
+        vkFreeMemory(vk->device, memory, NULL);
+        return;
+    }
+    recycled_trim(vk, VK_RECYCLED_BYTES - size);
+    if (vk->recycled_count == VK_RECYCLED_BLOCKS) {
+        const VkDeviceSize oldest = vk->recycled[0].size;
+        recycled_trim(vk, vk->recycled_bytes - oldest);
+    }
+    vk->recycled[vk->recycled_count++] =
+        (struct vk_recycled_block){ .memory = memory, .size = size, .type = type, .address = address, .mapped = mapped };
+    vk->recycled_bytes += size;
 }
 
 vkrt_result vk_buffer_create(vk_context *vk, VkDeviceSize size, VkBufferUsageFlags usage, vk_memory_use use,
@@ -112,25 +189,38 @@ vkrt_result vk_buffer_create(vk_context *vk, VkDeviceSize size, VkBufferUsageFla
         .allocationSize = req.size,
         .memoryTypeIndex = (uint32_t)type,
     };
-    vkrt_result r = vk_memory_allocate(vk, &alloc, label, &out->memory);
+    const bool address = alloc.pNext != NULL;
+    /* The hook counts every buffer's memory, recycled or not, so that its failures reach the
+     * same buffers whatever the pool holds. */
+    const bool fail = countdown_fires(&vk->fail_allocation);
+    const int reused = fail ? -1 : recycled_take(vk, req.size, (uint32_t)type, address);
+    vkrt_result r = VKRT_OK;
+    if (reused >= 0) {
+        out->memory = vk->recycled[reused].memory;
+        out->mapped = vk->recycled[reused].mapped;
+        out->allocated = vk->recycled[reused].size;
+    } else {
+        r = allocate_checked(vk, &alloc, label, fail, &out->memory);
+        out->allocated = req.size;
+    }
+    out->memory_type = (uint32_t)type;
+    out->address = address;
     if (r != VKRT_OK) {
         vk_buffer_destroy(vk, out);
         return r;
     }
-    out->allocated = req.size;
-    out->memory_type = (uint32_t)type;
     res = vkBindBufferMemory(vk->device, out->buffer, out->memory, 0);
     if (res != VK_SUCCESS) {
         vk_buffer_destroy(vk, out);
         return vk_fail(vk, res, "vkBindBufferMemory");
     }
-    if (flags & VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT) {
+    out->coherent = (flags & VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT) && (flags & VK_MEMORY_PROPERTY_HOST_COHERENT_BIT);
+    if ((flags & VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT) && !out->mapped) {
         res = vkMapMemory(vk->device, out->memory, 0, VK_WHOLE_SIZE, 0, &out->mapped);
         if (res != VK_SUCCESS) {
             vk_buffer_destroy(vk, out);
             return vk_fail(vk, res, "vkMapMemory");
         }
-        out->coherent = flags & VK_MEMORY_PROPERTY_HOST_COHERENT_BIT;
         /* Before the first write. On a CPU device (lavapipe) this is ordinary host memory, the
          * memory the shaders read; a GPU's mapped memory is the driver's, left as it is. */
         if (vk->properties.deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU)
@@ -147,10 +237,8 @@ VkDeviceAddress vk_buffer_address(vk_context *vk, const vk_buffer *b)
 
 void vk_buffer_destroy(vk_context *vk, vk_buffer *b)
 {
-    if (b->mapped) vkUnmapMemory(vk->device, b->memory);
     if (b->buffer) vkDestroyBuffer(vk->device, b->buffer, NULL);
-    vk_memory_free(vk, b->memory,
-                   &(VkMemoryAllocateInfo){ .allocationSize = b->allocated, .memoryTypeIndex = b->memory_type });
+    if (b->memory) recycle(vk, b->memory, b->allocated, b->memory_type, b->address, b->mapped);
     memset(b, 0, sizeof *b);
 }
 

@@ -13,6 +13,7 @@ typedef struct vk_buffer {
     uint32_t memory_type;    /* of that allocation */
     void *mapped;        /* persistently mapped when the memory is host-visible, else NULL */
     bool coherent;
+    bool address;        /* its memory was allocated for device addresses */
 } vk_buffer;
 
 typedef enum vk_memory_use {
@@ -60,6 +61,9 @@ vkrt_result vk_memory_allocate(vk_context *vk, const VkMemoryAllocateInfo *info,
                                VkDeviceMemory *out);
 /* Frees what vk_memory_allocate made from `info` (the same size and type); NULL: no-op. */
 void vk_memory_free(vk_context *vk, VkDeviceMemory memory, const VkMemoryAllocateInfo *info);
+/* Frees the memory the context keeps from destroyed buffers (vk_buffer_destroy keeps it for
+ * the next vk_buffer_create: VK_RECYCLED_BLOCKS in vk_context.h). */
+void vk_memory_recycled_release(vk_context *vk);
 
 /* How long a submission may take before its device is treated as lost: far beyond the 100 ms
  * submissions are sized to, and beyond lavapipe compiling a pipeline at its first dispatch. */

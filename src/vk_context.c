@@ -1,5 +1,7 @@
 #include "vk_context.h"
 
+#include "vk_buffer.h"
+
 #include <stdio.h>
 #include <string.h>
 #include <unistd.h>
@@ -425,6 +427,7 @@ void vk_context_destroy(vk_context *vk)
         vkDeviceWaitIdle(vk->device);
         if (vk->hung_fence) vkDestroyFence(vk->device, vk->hung_fence, NULL);
         if (vk->hung_commands) vkFreeCommandBuffers(vk->device, vk->command_pool, 1, &vk->hung_commands);
+        vk_memory_recycled_release(vk);
         vk_pipelines_destroy(vk);
         save_pipeline_cache(vk);
         if (vk->pipeline_cache) vkDestroyPipelineCache(vk->device, vk->pipeline_cache, NULL);

@@ -8,6 +8,17 @@
 
 #include "core.h"
 
+/* Device memory a context keeps from the buffers it destroys, for the next buffers it makes:
+ * every vkrt_trace_rays call and render makes its working buffers (rays, hits, continuation
+ * state, tiles) and destroys them at its end. On a CPU device (lavapipe) device memory is the
+ * host's heap: fresh memory faults its pages in, zeroed, at first touch, and memory freed back
+ * to the system is unmapped, a TLB shootdown across the cores. Calls whose allocations took
+ * that road (430-950 page faults a call against 0-70, depending on the heap's state, for the
+ * whole process) took up to 1.8x the time of the same calls in the same process whose didn't
+ * (README, issue 7's twenty-fourth session). At most this many blocks and bytes are kept. */
+#define VK_RECYCLED_BLOCKS 64u
+#define VK_RECYCLED_BYTES ((VkDeviceSize)64 << 20)
+
 struct vk_pipelines;
 
 typedef struct vk_context {
@@ -47,6 +58,17 @@ typedef struct vk_context {
                                          memory_in_use past this many bytes fail as out of device
                                          memory, without asking the driver
                                          (vkrt_context_desc.device_memory_limit; tests set it too) */
+    /* Device memory of destroyed buffers, kept mapped for the next buffer of its type and about
+     * its size (vk_buffer.c): not in memory_in_use, and within memory_budget with it. */
+    struct vk_recycled_block {
+        VkDeviceMemory memory;
+        VkDeviceSize size;
+        uint32_t type;
+        bool address;                 /* allocated for buffers reached by device address */
+        void *mapped;
+    } recycled[VK_RECYCLED_BLOCKS];
+    uint32_t recycled_count;          /* oldest first */
+    VkDeviceSize recycled_bytes;
     struct vk_pipelines *pipelines;   /* compiled lazily, owned (vk_pipeline.c) */
     /* Test knobs: zero from vk_context_create, set by tests through this private header only. */
     VkDeviceSize scene_buffer_limit;  /* 0: the device's limits; else the most bytes one buffer of a

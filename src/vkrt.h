@@ -111,7 +111,9 @@ typedef struct vkrt_context_desc {
     uint64_t device_memory_limit;    /* 0 (default): the device's memory heaps; else the bytes of
                                         device memory the GPU backend may hold at once: an
                                         allocation past it fails with
-                                        VKRT_ERROR_OUT_OF_DEVICE_MEMORY, as past a heap */
+                                        VKRT_ERROR_OUT_OF_DEVICE_MEMORY, as past a heap. The
+                                        context keeps up to 64 MiB of its calls' freed working
+                                        memory for the next calls, within this limit too */
 } vkrt_context_desc;
 
 typedef struct vkrt_context vkrt_context;

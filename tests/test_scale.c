@@ -693,6 +693,74 @@ static vkrt_scene *bunny_scene(vkrt_context *ctx, VkDeviceSize limit, vkrt_resul
     return s;
 }
 
+/* Whether the context's recycled blocks are exactly `handles` (in any order). */
+static bool recycled_are(const vk_context *vk, const VkDeviceMemory *handles, uint32_t count)
+{
+    if (vk->recycled_count != count) return false;
+    for (uint32_t i = 0; i < count; i++) {
+        bool found = false;
+        for (uint32_t j = 0; j < count; j++) found |= vk->recycled[j].memory == handles[i];
+        if (!found) return false;
+    }
+    return true;
+}
+
+/* A call's working buffers take the device memory the call before it left (vk_buffer.c keeps
+ * destroyed buffers' memory, VK_RECYCLED_BLOCKS): the same calls again allocate nothing and
+ * hand back the same blocks; the pool stays within its caps through calls of other sizes and
+ * kinds; it is not counted as memory in use, yet never keeps the context past a budget (a
+ * call that needs more than the budget leaves fails as out of device memory, and the pool is
+ * released rather than kept beyond it). */
+static void device_memory_of_a_call_is_reused_by_the_next(void)
+{
+    vkrt_context *ctx = counted_context();
+    if (!ctx) return;
+    warm_up(ctx);
+    vk_context *vk = ctx->vk;
+    vkrt_result r;
+    vkrt_scene *s = bunny_scene(ctx, 0, &r);
+    if (!s) {
+        vkrt_context_destroy(ctx);
+        return;
+    }
+    const VkDeviceSize scene_held = vk->memory_in_use;
+    CHECK(op_rays(ctx, s) == VKRT_OK);
+    VkDeviceMemory before[VK_RECYCLED_BLOCKS];
+    const uint32_t count = vk->recycled_count;
+    for (uint32_t i = 0; i < count; i++) before[i] = vk->recycled[i].memory;
+    CHECK_MSG(count > 0 && vk->memory_in_use == scene_held, "after a trace: %u recycled blocks, %llu bytes in use (%llu)",
+              count, (unsigned long long)vk->memory_in_use, (unsigned long long)scene_held);
+    const uint32_t countdown = 1000000;
+    vk->fail_allocation = countdown;
+    for (int i = 0; i < 3; i++) CHECK(op_rays(ctx, s) == VKRT_OK);
+    /* The hook counts every buffer's memory, recycled or not. */
+    CHECK_MSG(vk->fail_allocation < countdown, "the allocation hook counted %u buffers", countdown - vk->fail_allocation);
+    vk->fail_allocation = 0;
+    CHECK_MSG(recycled_are(vk, before, count) && vk->memory_in_use == scene_held,
+              "the same trace again: %u recycled blocks (%u before), the same ones: %d", vk->recycled_count, count,
+              recycled_are(vk, before, count));
+    for (size_t k = 0; k < sizeof scene_ops / sizeof scene_ops[0]; k++) {
+        CHECK_MSG(scene_ops[k].op(ctx, s) == VKRT_OK, "%s: %s", scene_ops[k].name, vkrt_context_last_error(ctx));
+        CHECK_MSG(vk->recycled_count <= VK_RECYCLED_BLOCKS && vk->recycled_bytes <= VK_RECYCLED_BYTES,
+                  "after %s: %u recycled blocks, %llu bytes", scene_ops[k].name, vk->recycled_count,
+                  (unsigned long long)vk->recycled_bytes);
+    }
+    const VkDeviceSize held = vk->memory_in_use, pooled = vk->recycled_bytes;
+    CHECK(pooled > 0);
+    vk->memory_budget = held;
+    r = op_render(ctx, s);
+    CHECK_MSG(r == VKRT_ERROR_OUT_OF_DEVICE_MEMORY, "a render with no room in the budget: %s", vkrt_result_string(r));
+    CHECK_MSG(vk->memory_in_use == held && vk->memory_in_use + vk->recycled_bytes <= vk->memory_budget,
+              "after it: %llu bytes in use (%llu before), %llu recycled, budget %llu",
+              (unsigned long long)vk->memory_in_use, (unsigned long long)held,
+              (unsigned long long)vk->recycled_bytes, (unsigned long long)vk->memory_budget);
+    vk->memory_budget = 0;
+    CHECK(op_render(ctx, s) == VKRT_OK);
+    fprintf(stderr, "  %u blocks reused by each trace; %llu bytes kept after every kind of call\n", count,
+            (unsigned long long)pooled);
+    destroy_and_check_nothing_left(ctx, s);
+}
+
 /* A device memory budget of 100 KiB cannot hold the bunny's 208 KB of wide arrays:
  * scene creation fails with VKRT_ERROR_OUT_OF_DEVICE_MEMORY and a message naming the budget,
  * frees every host block and device allocation it made, and the context goes on (the scene
@@ -1030,6 +1098,7 @@ int main(int argc, char **argv)
         RUN(split_spatial_split_scene_renders_as_one_buffer);
         RUN(split_scene_lights_as_one_buffer);
         RUN(ten_million_triangles_match_the_cpu_reference);
+        RUN(device_memory_of_a_call_is_reused_by_the_next);
         RUN(small_memory_budget_fails_cleanly);
         RUN(binary_arrays_beyond_the_budget_fail_alone);
         RUN(every_failed_device_allocation_is_out_of_device_memory);
