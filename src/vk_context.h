@@ -13,7 +13,7 @@
  * state, tiles) and destroys them at its end. On a CPU device (lavapipe) device memory is the
  * host's heap: fresh memory faults its pages in, zeroed, at first touch, and memory freed back
  * to the system is unmapped, a TLB shootdown across the cores. Calls whose allocations took
- * that road (430-950 page faults a call against 0-70, depending on the heap's state, for the
+ * that road (430-950 page faults a call against 0-140, depending on the heap's state, for the
  * whole process) took up to 1.8x the time of the same calls in the same process whose didn't
  * (README, issue 7's twenty-fourth session). At most this many blocks and bytes are kept. */
 #define VK_RECYCLED_BLOCKS 64u
