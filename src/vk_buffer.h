@@ -24,6 +24,8 @@ typedef enum vk_memory_use {
 
 vkrt_result vk_buffer_create(vk_context *vk, VkDeviceSize size, VkBufferUsageFlags usage, vk_memory_use use,
                              const char *label, vk_buffer *out);
+/* Destroys the buffer; its memory stays with the context, mapped, for a later buffer of its type
+ * and size (up to VK_RECYCLED_BLOCKS blocks, vk_context.h). */
 void vk_buffer_destroy(vk_context *vk, vk_buffer *b);
 /* The device address of a buffer created with VK_BUFFER_USAGE_SHADER_DEVICE_ADDRESS_BIT (which
  * needs vk->buffer_address). */
@@ -55,8 +57,8 @@ vkrt_result vk_buffer_invalidate(vk_context *vk, vk_buffer *b);
 
 /* Every device memory allocation of the library goes through these: they keep
  * vk->memory_in_use and vk->heap_in_use, refuse what the heap (or the test knob's budget)
- * cannot hold with VKRT_ERROR_OUT_OF_DEVICE_MEMORY, naming `label`, and honour the
- * fail_allocation test hook. */
+ * cannot hold with VKRT_ERROR_OUT_OF_DEVICE_MEMORY, naming `label`, once the recycled blocks
+ * are freed, and honour the fail_allocation test hook. */
 vkrt_result vk_memory_allocate(vk_context *vk, const VkMemoryAllocateInfo *info, const char *label,
                                VkDeviceMemory *out);
 /* Frees what vk_memory_allocate made from `info` (the same size and type); NULL: no-op. */

@@ -52,7 +52,8 @@ typedef struct vk_context {
                                          signalled): nothing is submitted any more */
     VkFence hung_fence;               /* a submission whose fence timed out, and its command */
     VkCommandBuffer hung_commands;    /* buffer: freed at destruction, after the device is idle */
-    VkDeviceSize memory_in_use;       /* device memory this context has allocated and not freed, */
+    VkDeviceSize memory_in_use;       /* device memory of this context's live allocations (the
+                                         recycled blocks below apart), */
     VkDeviceSize heap_in_use[VK_MAX_MEMORY_HEAPS]; /* in all and per memory heap */
     VkDeviceSize memory_budget;       /* 0: none; else device memory allocations that would take
                                          memory_in_use past this many bytes fail as out of device
