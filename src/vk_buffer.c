@@ -101,11 +101,12 @@ void vk_memory_free(vk_context *vk, VkDeviceMemory memory, const VkMemoryAllocat
     vk->heap_in_use[vk->memory.memoryTypes[info->memoryTypeIndex].heapIndex] -= info->allocationSize;
 }
 
-/* A recycled block for `size` bytes of memory type `type`, at most an eighth larger (a call's
- * working buffers come back at the sizes they had, and a scene's buffers should not hold, and
- * report, memory they do not need), taken out of the pool as live memory; -1: none. Never past
- * memory_budget's count of live memory. */
-static int recycled_take(vk_context *vk, VkDeviceSize size, uint32_t type, bool address)
+/* Takes a recycled block for `size` bytes of memory type `type` into *out, at most an eighth
+ * larger (a call's working buffers come back at the sizes they had, and a scene's buffers
+ * should not hold, and report, memory they do not need), as live memory; false: none. Never
+ * past memory_budget's count of live memory. */
+static bool recycled_take(vk_context *vk, VkDeviceSize size, uint32_t type, bool address,
+                          struct vk_recycled_block *out)
 {
     for (uint32_t i = vk->recycled_count; i-- > 0;) {
         const struct vk_recycled_block b = vk->recycled[i];
@@ -113,13 +114,13 @@ static int recycled_take(vk_context *vk, VkDeviceSize size, uint32_t type, bool 
         if (vk->memory_budget && vk->memory_in_use + b.size > vk->memory_budget) continue;
         vk->recycled_count--;
         memmove(vk->recycled + i, vk->recycled + i + 1, (vk->recycled_count - i) * sizeof vk->recycled[0]);
-        vk->recycled[vk->recycled_count] = b; /* parked at the end for the caller to read */
         vk->recycled_bytes -= b.size;
         vk->memory_in_use += b.size;
         vk->heap_in_use[vk->memory.memoryTypes[type].heapIndex] += b.size;
-        return (int)vk->recycled_count;
+        *out = b;
+        return true;
     }
-    return -1;
+    return false;
 }
 
 /* Keeps a destroyed buffer's memory (still mapped) for a later buffer, or frees it where it
@@ -193,12 +194,12 @@ vkrt_result vk_buffer_create(vk_context *vk, VkDeviceSize size, VkBufferUsageFla
     /* The hook counts every buffer's memory, recycled or not, so that its failures reach the
      * same buffers whatever the pool holds. */
     const bool fail = countdown_fires(&vk->fail_allocation);
-    const int reused = fail ? -1 : recycled_take(vk, req.size, (uint32_t)type, address);
+    struct vk_recycled_block kept;
     vkrt_result r = VKRT_OK;
-    if (reused >= 0) {
-        out->memory = vk->recycled[reused].memory;
-        out->mapped = vk->recycled[reused].mapped;
-        out->allocated = vk->recycled[reused].size;
+    if (!fail && recycled_take(vk, req.size, (uint32_t)type, address, &kept)) {
+        out->memory = kept.memory;
+        out->mapped = kept.mapped;
+        out->allocated = kept.size;
     } else {
         r = allocate_checked(vk, &alloc, label, fail, &out->memory);
         out->allocated = req.size;

@@ -878,6 +878,17 @@ static vkrt_scene *mesh_scene(vkrt_context *ctx, const float *pos, uint32_t vert
     return s;
 }
 
+/* The same mesh twice: *wide traced through the wide BVH, *binary kept to the binary one (the
+ * test knob). */
+static void wide_and_binary_scenes(const float *pos, uint32_t vertices, const uint32_t *idx, uint32_t tris,
+                                   vkrt_bvh_builder builder, vkrt_scene **wide, vkrt_scene **binary)
+{
+    *wide = mesh_scene(gpu, pos, vertices, idx, tris, builder);
+    gpu->vk->no_wide_traversal = true;
+    *binary = mesh_scene(gpu, pos, vertices, idx, tris, builder);
+    gpu->vk->no_wide_traversal = false;
+}
+
 /* ---- rays along the wide nodes' box planes ---- */
 
 enum { GRID_CUBES = 5, PLANE_RAYS = 96 };
@@ -919,10 +930,8 @@ static void gpu_wide_boxes_hold_rays_along_their_planes(void)
     float *pos;
     uint32_t *idx, vertices, tris;
     make_cube_grid(&pos, &idx, &vertices, &tris);
-    vkrt_scene *wide = mesh_scene(gpu, pos, vertices, idx, tris, VKRT_BVH_BUILDER_DEFAULT);
-    gpu->vk->no_wide_traversal = true;
-    vkrt_scene *binary = mesh_scene(gpu, pos, vertices, idx, tris, VKRT_BVH_BUILDER_DEFAULT);
-    gpu->vk->no_wide_traversal = false;
+    vkrt_scene *wide, *binary;
+    wide_and_binary_scenes(pos, vertices, idx, tris, VKRT_BVH_BUILDER_DEFAULT, &wide, &binary);
     free(pos);
     free(idx);
     const size_t planes = 2 * GRID_CUBES, n = 3 * planes * PLANE_RAYS;
@@ -968,10 +977,9 @@ enum { CHAIN_TRIS = 70, CHAIN_UP_FROM = 61, CHAIN_RAYS = 64, CHAIN_RANDOM_RAYS =
  * midpoint builder splits the first off at each level (below the midpoint of 0.4^i and about 0:
  * the rest): a chain as deep as VKRT_MAX_BVH_DEPTH, its last leaf the triangles left at that
  * depth, which the 4-wide collapse makes 22 levels (three binary levels a wide node). In the
- * (y, z) plane,
- * triangle i points down (vertices (-1, 1), (1, 1), (0, -2)) from CHAIN_UP_FROM on and up
- * ((-1, -1), (1, -1), (0, 2)) before: both boxes hold (0.6, +-0.9), which only the up ones
- * cover at z = -0.9 and only the down ones at z = 0.9. */
+ * (y, z) plane, triangle i points down (vertices (-1, 1), (1, 1), (0, -2)) from CHAIN_UP_FROM
+ * on and up ((-1, -1), (1, -1), (0, 2)) before: both boxes hold (0.6, +-0.9), which only the
+ * up ones cover at z = -0.9 and only the down ones at z = 0.9. */
 static void make_chain(float **out_pos, uint32_t **out_idx)
 {
     float *pos = malloc(CHAIN_TRIS * 9 * sizeof *pos);
@@ -1001,10 +1009,8 @@ static void gpu_deep_wide_bvhs_take_the_wide_traversal(void)
     float *pos;
     uint32_t *idx;
     make_chain(&pos, &idx);
-    vkrt_scene *wide = mesh_scene(gpu, pos, CHAIN_TRIS * 3, idx, CHAIN_TRIS, VKRT_BVH_BUILDER_MIDPOINT);
-    gpu->vk->no_wide_traversal = true;
-    vkrt_scene *binary = mesh_scene(gpu, pos, CHAIN_TRIS * 3, idx, CHAIN_TRIS, VKRT_BVH_BUILDER_MIDPOINT);
-    gpu->vk->no_wide_traversal = false;
+    vkrt_scene *wide, *binary;
+    wide_and_binary_scenes(pos, CHAIN_TRIS * 3, idx, CHAIN_TRIS, VKRT_BVH_BUILDER_MIDPOINT, &wide, &binary);
     free(pos);
     free(idx);
     if (!wide || !binary) goto done;
