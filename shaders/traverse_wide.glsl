@@ -167,7 +167,7 @@ uint take_ray_slot(uint steps)
  * store for each of the eight), and every push in the loop's code costs all of that in every
  * step whether a lane pushes or not (one more push: 1.06-1.08x the time, in-process pairs on
  * dragon_200k). Against single entries, groups took 0.92-0.94x the time on closest-hit AO rays,
- * 0.97-0.99x on primary rays and 0.99-1.03x on any-hit AO rays (README, issue 7's
+ * 0.97-0.99x on primary rays and 0.99-1.03x on any-hit AO rays (docs/issue7.md, the
  * twenty-third session).
  *
  * On the stack a group is its node and one word: the front key with its low ten bits cleared
@@ -208,10 +208,10 @@ uvec4 group_decode(uint word)
  * an iteration's first step idles for the rest of it, which costs most on rays of few steps.
  * Measured against one step an iteration (dragon_11k to the full dragon, 1024x1024): two
  * steps 0.86-0.96x the time on AO rays and 0.92-1.00x on primary rays; four 0.85-0.94x on AO
- * rays but up to 1.10x on primary rays; six no better than four, eight 1.1-1.5x slower (README,
- * issue 7's thirteenth session). Two is the most that slows no query. The camera's rays take
- * no new ray: one step. Written out rather than as an inner loop, so that there is one loop,
- * whose iterations the budget bounds as lavapipe counts them. */
+ * rays but up to 1.10x on primary rays; six no better than four, eight 1.1-1.5x slower
+ * (docs/issue7.md, the thirteenth session). Two is the most that slows no query. The camera's
+ * rays take no new ray: one step. Written out rather than as an inner loop, so that there is
+ * one loop, whose iterations the budget bounds as lavapipe counts them. */
 const uint WIDE_STEPS = WIDE_REFILL ? 2u : 1u;
 
 /* One step of trace_wide's loop: a group taken from the stack where the lane has none, a

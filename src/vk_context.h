@@ -15,7 +15,7 @@
  * to the system is unmapped, a TLB shootdown across the cores. Calls whose allocations took
  * that road (430-950 page faults a call against 0-140, depending on the heap's state, for the
  * whole process) took up to 1.8x the time of the same calls in the same process whose didn't
- * (README, issue 7's twenty-fourth session). At most this many blocks and bytes are kept. */
+ * (docs/issue7.md, the twenty-fourth session). At most this many blocks and bytes are kept. */
 #define VK_RECYCLED_BLOCKS 64u
 #define VK_RECYCLED_BYTES ((VkDeviceSize)64 << 20)
 
