@@ -1233,14 +1233,16 @@ typedef struct ray_call {
     gpu_pacer pacer;
 } ray_call;
 
-static vkrt_result ray_chunk_create(ray_call *call, ray_chunk *c)
+/* Makes chunk c's buffers, with a readback buffer for its hits where `readback` (the first
+ * chunk's is added once its buffers show where the hits come back: gpu_trace_rays). */
+static vkrt_result ray_chunk_create(ray_call *call, ray_chunk *c, bool readback)
 {
     vk_context *vk = call->vk;
     vkrt_result r = create_render_objects(vk, call->scene, call->pipe.set_layout, 1, 1, call->capacity, call->capacity,
                                           call->budget ? ray_resume_slots(call->scene, call->naive, call->capacity) : 0,
                                           0, ray_slot_words(call->scene, call->naive, call->capacity), &c->o);
     c->created = true;
-    if (r == VKRT_OK && call->hits == HITS_READBACK) r = create_hit_readback(vk, &c->o, call->capacity);
+    if (r == VKRT_OK && readback) r = create_hit_readback(vk, &c->o, call->capacity);
     if (r == VKRT_OK && call->cull && !(c->sent_index = core_calloc_array(vk->core, call->capacity, sizeof *c->sent_index)))
         r = VKRT_ERROR_OUT_OF_MEMORY;
     return r;
@@ -1360,10 +1362,7 @@ vkrt_result gpu_trace_rays(vk_context *vk, const gpu_scene *scene, const gpu_tra
      * traversal, the BVH's reference. Decided before the first chunk's buffers are made, by
      * what they will be: mapped on a CPU device, whose memory is the host's. */
     call.cull = !call.naive && vk->properties.deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU;
-    /* Where the hits come back is settled below, by the first chunk's buffers: until then it
-     * gets no readback buffer. */
-    call.hits = HITS_MAPPED;
-    r = ray_chunk_create(&call, &chunks[0]);
+    r = ray_chunk_create(&call, &chunks[0], false);
     if (r == VKRT_OK && call.cull && !chunks[0].o.rays.mapped) {
         /* Not mapped after all: every ray goes to the device. */
         call.cull = false;
@@ -1373,16 +1372,14 @@ vkrt_result gpu_trace_rays(vk_context *vk, const gpu_scene *scene, const gpu_tra
     /* Where the rays go straight into mapped memory, so can the hits come back: the host reads
      * the hit buffer itself, without the copy into the readback buffer that lavapipe's threads
      * would make (0.99x the time on primary rays). */
-    if (r == VKRT_OK && !(call.cull && chunks[0].o.hits.mapped)) {
-        call.hits = HITS_READBACK;
-        r = create_hit_readback(vk, &chunks[0].o, call.capacity);
-    }
+    call.hits = call.cull && chunks[0].o.hits.mapped ? HITS_MAPPED : HITS_READBACK;
+    if (r == VKRT_OK && call.hits == HITS_READBACK) r = create_hit_readback(vk, &chunks[0].o, call.capacity);
     if (r == VKRT_OK) r = ray_chunk_fill(&call, &chunks[0]);
     if (r == VKRT_OK && chunks[0].sent) r = ray_chunk_launch(&call, &chunks[0]);
     for (int at = 0; r == VKRT_OK && chunks[at].sent; at ^= 1) {
         ray_chunk *c = &chunks[at], *next = &chunks[at ^ 1];
         /* The next chunk's rays into the other buffers while the device traces this one. */
-        if (call.next < count && !next->created) r = ray_chunk_create(&call, next);
+        if (call.next < count && !next->created) r = ray_chunk_create(&call, next, call.hits == HITS_READBACK);
         if (r == VKRT_OK && call.next < count) r = ray_chunk_fill(&call, next);
         const vkrt_result finished = ray_chunk_finish(&call, c);
         if (r == VKRT_OK) r = finished;
