@@ -26,18 +26,32 @@
 const float ROUNDING_MIN_NORMAL = 1.17549435e-38; /* 2^-126 */
 const float ROUNDING_MAX_NORMAL = 1.70141183e+38; /* 2^127: its upper neighbour is finite */
 
+const double ROUNDING_DENORMAL_ULP = 1.4012984643248171e-45LF; /* 2^-149, exact in double */
+
+/* The value of a float that is not negative, denormals included, as a double. A device may flush
+ * float denormals to zero wherever they are an operand, conversions and comparisons included
+ * (NVIDIA's driver 580 on an H100 compared a guess an ulp below 2^-126 as zero), but not in a
+ * bit cast: a denormal's bits are its value in units of 2^-149. */
+double value_of(float x)
+{
+    uint bits = floatBitsToUint(x);
+    return bits < 0x00800000u ? double(bits) * ROUNDING_DENORMAL_ULP : double(x);
+}
+
 /* The nearest float to a / b (a, b positive and finite) given q, a float at most one ulp from
  * it: q or the neighbour on the side of the midpoint that a / b lies beyond. A quotient of
  * floats is never exactly a midpoint in the normal range, so there are no ties. */
 float round_quotient(float a, float b, float q)
 {
-    /* A guess may be a denormal below 2^-126: the midpoints of denormals are exact too. */
-    if (!(q > 0.0 && q <= ROUNDING_MAX_NORMAL)) return q;
+    /* A guess may be a denormal below 2^-126: the midpoints of denormals are exact too. Its
+     * range is tested on its bits (positive, not zero, at most 2^127), its value taken by
+     * value_of, so that a device that flushes denormals still corrects it. */
     uint bits = floatBitsToUint(q);
+    if (bits == 0u || bits > floatBitsToUint(ROUNDING_MAX_NORMAL)) return q;
     float up = uintBitsToFloat(bits + 1u), down = uintBitsToFloat(bits - 1u);
     precise double da = double(a), db = double(b);
-    precise double at_up = ((double(q) + double(up)) * 0.5LF) * db;
-    precise double at_down = ((double(q) + double(down)) * 0.5LF) * db;
+    precise double at_up = ((value_of(q) + value_of(up)) * 0.5LF) * db;
+    precise double at_down = ((value_of(q) + value_of(down)) * 0.5LF) * db;
     return da > at_up ? up : (da < at_down ? down : q);
 }
 
