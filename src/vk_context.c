@@ -7,6 +7,7 @@
 #include <unistd.h>
 
 #include "../shaders/vkrt_shared.h"
+#include "tls_pin.h"
 #include "vk_pipeline.h"
 
 #define VALIDATION_LAYER "VK_LAYER_KHRONOS_validation"
@@ -154,6 +155,9 @@ static vkrt_result create_instance(vk_context *vk, bool validation)
         return core_fail(vk->core, VKRT_ERROR_NO_DEVICE, "no Vulkan driver is installed (vkCreateInstance: %s)",
                          vk_result_string(res));
     if (res != VK_SUCCESS) return vk_fail(vk, res, "vkCreateInstance");
+    /* The drivers are loaded now; those that need static TLS must stay (tls_pin.h). */
+    vkrt_result pinned = tls_pin_static_libraries(vk->core);
+    if (pinned != VKRT_OK) return pinned;
 
     if (debug_utils) {
         PFN_vkCreateDebugUtilsMessengerEXT create =
@@ -324,6 +328,9 @@ static vkrt_result create_device(vk_context *vk)
     };
     VkResult res = vkCreateDevice(vk->physical, &info, NULL, &vk->device);
     if (res != VK_SUCCESS) return vk_fail(vk, res, "vkCreateDevice");
+    /* A driver may load more of itself for a device. */
+    vkrt_result pinned = tls_pin_static_libraries(vk->core);
+    if (pinned != VKRT_OK) return pinned;
     vkGetDeviceQueue(vk->device, vk->queue_family, 0, &vk->queue);
 
     VkCommandPoolCreateInfo pool = {
