@@ -697,7 +697,12 @@ vkrt_result vkrt_trace_rays(vkrt_context *ctx, vkrt_scene *scene, const vkrt_tra
         return core_fail(c, VKRT_ERROR_INVALID_ARGUMENT, "vkrt_trace_desc.traversal has no valid value (%d)", (int)d.traversal);
     vkrt_result r = check_tracing(ctx, d.intersector, d.precision, "vkrt_trace_desc");
     if (r != VKRT_OK) return r;
-    if (count == 0) return VKRT_OK;
+    const double t0 = core_now_ms();
+    vkrt_trace_stats stats = { .rays = count };
+    if (count == 0) {
+        if (d.out_stats) *d.out_stats = stats;
+        return VKRT_OK;
+    }
     vkrt_traversal traversal = d.traversal ? d.traversal : VKRT_TRAVERSAL_BVH;
     if (ctx->vk) {
         gpu_trace_rays_params p = {
@@ -707,7 +712,11 @@ vkrt_result vkrt_trace_rays(vkrt_context *ctx, vkrt_scene *scene, const vkrt_tra
         };
         if ((r = ensure_surfaces(scene, false)) == VKRT_OK)
             r = ensure_arrays(scene, gpu_trace_rays_arrays(&scene->gpu, traversal));
-        if (r == VKRT_OK) r = gpu_trace_rays(ctx->vk, &scene->gpu, &p, rays, count, out_hits);
+        gpu_ray_counts counts = { 0 };
+        if (r == VKRT_OK) r = gpu_trace_rays(ctx->vk, &scene->gpu, &p, rays, count, out_hits, &counts);
+        stats.trace_ms = counts.device_ms;
+        stats.rays_culled = counts.culled;
+        stats.submissions = counts.submissions;
     } else {
         cpu_trace_scene s = cpu_scene_of(scene);
         cpu_trace_rays_params p = {
@@ -715,6 +724,9 @@ vkrt_result vkrt_trace_rays(vkrt_context *ctx, vkrt_scene *scene, const vkrt_tra
             .threads = ctx->cpu_threads, .progress = d.progress, .progress_user = d.progress_user,
         };
         r = cpu_trace_rays(c, &s, &p, rays, count, out_hits);
+        stats.trace_ms = core_now_ms() - t0;
     }
+    stats.total_ms = core_now_ms() - t0;
+    if (r == VKRT_OK && d.out_stats) *d.out_stats = stats;
     return r;
 }

@@ -49,6 +49,8 @@ typedef struct crow {
     size_t rays;
     double build_ms, bytes_per_tri;
     double trace_ms, mrays, ratio; /* ratio: Mrays/s over Embree's for the same rays and query */
+    double device_ms;              /* vkrt-gpu: the median of the calls' device times (vkrt_trace_stats);
+                                      negative for the other engines */
     uint64_t hits;
     double sum_t;                  /* closest queries only */
     uint64_t mismatches;           /* rays whose answer differs from Embree's */
@@ -152,18 +154,23 @@ static vkrt_result make_ao_rays(compare *c, const vkrt_hit *primary, const float
     return VKRT_OK;
 }
 
-/* One call of engine e on query q's rays into out; *ms: its wall-clock time. */
-static vkrt_result trace(compare *c, engine e, query q, vkrt_hit *out, double *ms)
+/* One call of engine e on query q's rays into out; *ms: its wall-clock time; *device_ms: the
+ * GPU's device time of it (vkrt-gpu), else -1. */
+static vkrt_result trace(compare *c, engine e, query q, vkrt_hit *out, double *ms, double *device_ms)
 {
     const vkrt_ray *rays = c->rays[q != QUERY_PRIMARY];
     size_t n = c->ray_count[q != QUERY_PRIMARY];
     bool any_hit = q == QUERY_AO_ANY;
+    *device_ms = -1.0;
     if (e == ENGINE_EMBREE)
         return bench_embree_trace(c->embree, rays, n, any_hit, out, ms, c->report->error, sizeof c->report->error);
     vkrt_context *ctx = e == ENGINE_VKRT_CPU ? c->cpu : c->gpu;
+    vkrt_trace_stats stats = { 0 };
     double t0 = now_ms();
-    vkrt_result r = vkrt_trace_rays(ctx, c->scene[e], &(vkrt_trace_desc){ .any_hit = any_hit }, rays, n, out);
+    vkrt_result r = vkrt_trace_rays(ctx, c->scene[e], &(vkrt_trace_desc){ .any_hit = any_hit, .out_stats = &stats },
+                                    rays, n, out);
     *ms = now_ms() - t0;
+    if (e == ENGINE_VKRT_GPU) *device_ms = stats.trace_ms;
     if (r != VKRT_OK)
         snprintf(c->report->error, sizeof c->report->error, "vkrt_trace_rays (%s, %s %s rays): %s", engine_name(e),
                  query_rays(q), query_name(q), vkrt_context_last_error(ctx));
@@ -212,16 +219,17 @@ static vkrt_result measure_query(compare *c, query q)
             w->bytes_per_tri = (double)s->traversal_bytes / (double)s->triangles;
         }
     }
-    double ms[ENGINE_COUNT][1001];
+    double ms[ENGINE_COUNT][1001], device_ms[ENGINE_COUNT][1001];
     for (uint32_t i = 0; i <= c->repeat; i++) /* call 0: the warm-up */
         for (unsigned k = 0; k < n; k++) {
-            vkrt_result r = trace(c, order[k], q, c->hits[order[k]], &ms[k][i]);
+            vkrt_result r = trace(c, order[k], q, c->hits[order[k]], &ms[k][i], &device_ms[k][i]);
             if (r != VKRT_OK) return r;
         }
     const crow *embree = &rows[0]; /* ENGINE_EMBREE always runs, first */
     for (unsigned k = 0; k < n; k++) {
         crow *w = &rows[k];
         w->trace_ms = bench_median(ms[k] + 1, c->repeat);
+        w->device_ms = bench_median(device_ms[k] + 1, c->repeat);
         w->mrays = w->trace_ms > 0.0 ? (double)w->rays / (w->trace_ms * 1e3) : 0.0;
         w->ratio = embree->mrays > 0.0 ? w->mrays / embree->mrays : 0.0;
         for (size_t i = 0; i < w->rays; i++) {
@@ -241,7 +249,8 @@ static void print_header(const compare *c)
     const vkrt_scene_stats *s = &c->stats[ENGINE_VKRT_CPU];
     fprintf(c->out, "vkrt bench --compare embree: %s (%llu triangles), %ux%u; Embree %s and vkrt's CPU backend (%s "
                     "code) on %u thread%s, GPU %s;\nmedian of %u timed call%s after a warm-up, wall-clock time of the whole call "
-                    "(on the GPU with the upload of the rays and the readback of the hits);\nprimary rays through the "
+                    "(on the GPU with the upload of the rays and the readback of the hits; device ms: the median of the same "
+                    "calls' device time, timestamps around the trace dispatches);\nprimary rays through the "
                     "pixel centres, then %d cosine-distributed AO rays per primary hit from vkrt_ray_offset origins, "
                     "up to distance %g\n\n",
             bench_scene_name(&c->source), (unsigned long long)s->triangles, c->width, c->height,
@@ -252,17 +261,20 @@ static void print_header(const compare *c)
     if (s->alpha_tested)
         fprintf(c->out, "alpha-masked materials: vkrt passes through masked texels, Embree sees every triangle; the "
                         "checksums differ by design\n\n");
-    fprintf(c->out, "| rays | query | engine | rays traced | build ms | bytes/tri | trace ms | Mrays/s | vkrt/Embree "
-                    "| hits | sum of t | mismatches | max t diff |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+    fprintf(c->out, "| rays | query | engine | rays traced | build ms | bytes/tri | trace ms | device ms | Mrays/s "
+                    "| vkrt/Embree | hits | sum of t | mismatches | max t diff |\n"
+                    "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
 }
 
 static void print_row(const compare *c, const crow *w)
 {
-    char sum[32] = "-";
+    char sum[32] = "-", device[32] = "-";
     if (w->q != QUERY_AO_ANY) snprintf(sum, sizeof sum, "%.6e", w->sum_t);
-    fprintf(c->out, "| %s | %s | %s | %zu | %.1f | %.1f | %.2f | %.2f | %.2f | %llu | %s | %llu | %.1e |\n",
+    if (w->device_ms >= 0.0) snprintf(device, sizeof device, "%.2f", w->device_ms);
+    fprintf(c->out, "| %s | %s | %s | %zu | %.1f | %.1f | %.2f | %s | %.2f | %.2f | %llu | %s | %llu | %.1e |\n",
             query_rays(w->q), query_name(w->q), engine_name(w->e), w->rays, w->build_ms, w->bytes_per_tri, w->trace_ms,
-            w->mrays, w->ratio, (unsigned long long)w->hits, sum, (unsigned long long)w->mismatches, w->t_rel_max);
+            device, w->mrays, w->ratio, (unsigned long long)w->hits, sum, (unsigned long long)w->mismatches,
+            w->t_rel_max);
     fflush(c->out);
 }
 
@@ -271,17 +283,18 @@ static vkrt_result write_csv(const compare *c, const char *path)
     bench_csv csv;
     vkrt_result r = bench_csv_begin(&csv, path, "scene,triangles,width,height,threads,rays,query,engine,ray_count,"
                                                 "build_ms,bytes_per_triangle,trace_ms,mrays_per_s,ratio_to_embree,"
-                                                "hits,sum_t,mismatches,t_rel_max");
+                                                "hits,sum_t,mismatches,t_rel_max,device_ms");
     if (r != VKRT_OK) return r;
     for (unsigned i = 0; i < c->row_count; i++) {
         const crow *w = &c->rows[i];
-        char sum[32] = "";
+        char sum[32] = "", device[32] = "";
         if (w->q != QUERY_AO_ANY) snprintf(sum, sizeof sum, "%.9e", w->sum_t);
-        fprintf(csv.f, "\"%s\",%llu,%u,%u,%u,%s,%s,%s,%zu,%.4f,%.3f,%.4f,%.6f,%.6f,%llu,%s,%llu,%.3e\n",
+        if (w->device_ms >= 0.0) snprintf(device, sizeof device, "%.4f", w->device_ms);
+        fprintf(csv.f, "\"%s\",%llu,%u,%u,%u,%s,%s,%s,%zu,%.4f,%.3f,%.4f,%.6f,%.6f,%llu,%s,%llu,%.3e,%s\n",
                 bench_scene_name(&c->source), (unsigned long long)c->stats[ENGINE_VKRT_CPU].triangles,
                 c->width, c->height, c->threads, query_rays(w->q), query_name(w->q), engine_name(w->e), w->rays,
                 w->build_ms, w->bytes_per_tri, w->trace_ms, w->mrays, w->ratio, (unsigned long long)w->hits, sum,
-                (unsigned long long)w->mismatches, w->t_rel_max);
+                (unsigned long long)w->mismatches, w->t_rel_max, device);
     }
     return bench_csv_end(&csv);
 }

@@ -1231,6 +1231,8 @@ typedef struct ray_call {
     hits_way hits;
     uint32_t capacity, naive_chunks;
     gpu_pacer pacer;
+    double device_ms;       /* the passes' device time so far */
+    uint64_t culled;        /* rays the host answered (call->cull) */
 } ray_call;
 
 /* Makes chunk c's buffers, with a readback buffer for its hits where `readback` (the first
@@ -1284,6 +1286,7 @@ static vkrt_result ray_chunk_fill(ray_call *call, ray_chunk *c)
             n = ray_cull_compact(call->rays + first, left, call->scene->node_count ? &call->scene->root : NULL, n,
                                  c->o.rays.mapped, c->sent_index, call->out_hits + first, &read);
             call->next += read;
+            call->culled += read - n;
             if (n == 0) continue;
             r = vk_buffer_flush(vk, &c->o.rays);
         } else {
@@ -1321,7 +1324,7 @@ static vkrt_result ray_chunk_finish(ray_call *call, ray_chunk *c)
 {
     pass_in_flight *launched = c->launched ? &c->pass : NULL;
     c->launched = false; /* run_passes waits for it first, whatever follows */
-    return run_passes(call->vk, &c->o, &c->desc, c->push, NULL, launched);
+    return run_passes(call->vk, &c->o, &c->desc, c->push, &call->device_ms, launched);
 }
 
 /* Chunk c's hits to their rays' places in out_hits. The wide traversal's finish writes a miss
@@ -1338,7 +1341,7 @@ static void ray_chunk_collect(ray_call *call, ray_chunk *c)
 }
 
 vkrt_result gpu_trace_rays(vk_context *vk, const gpu_scene *scene, const gpu_trace_rays_params *params,
-                           const vkrt_ray *rays, size_t count, vkrt_hit *out_hits)
+                           const vkrt_ray *rays, size_t count, vkrt_hit *out_hits, gpu_ray_counts *out_counts)
 {
     assert(arrays_uploaded(scene, gpu_trace_rays_arrays(scene, params->traversal)));
     ray_call call = { .vk = vk, .scene = scene, .params = params, .rays = rays, .count = count, .out_hits = out_hits };
@@ -1390,6 +1393,8 @@ vkrt_result gpu_trace_rays(vk_context *vk, const gpu_scene *scene, const gpu_tra
     if (r == VKRT_OK && params->progress) params->progress(params->progress_user, "trace", 1.0f);
     ray_chunk_destroy(vk, &chunks[0]);
     ray_chunk_destroy(vk, &chunks[1]);
+    *out_counts = (gpu_ray_counts){ .device_ms = call.device_ms, .culled = call.culled,
+                                    .submissions = call.pacer.submissions };
     return r;
 }
 

@@ -516,6 +516,20 @@ typedef struct vkrt_hit {
     float u, v;               /* barycentrics of v1 and v2 */
 } vkrt_hit;
 
+/* What one vkrt_trace_rays() call did (vkrt_trace_desc.out_stats). */
+typedef struct vkrt_trace_stats {
+    double trace_ms;          /* GPU: device time of the trace dispatches (timestamp queries; 0
+                                 where the device has none); CPU: wall-clock time of the tracing
+                                 threads */
+    double total_ms;          /* wall-clock time of the whole call: on the GPU with the rays'
+                                 upload, the hits' readback and the waits for the device */
+    uint64_t rays;            /* the call's rays */
+    uint64_t rays_culled;     /* GPU backend on a CPU device (lavapipe), BVH traversal: rays that
+                                 cannot enter the scene's box, answered on the host as misses
+                                 without reaching the device; 0 elsewhere */
+    uint32_t submissions;     /* GPU: device submissions the call took */
+} vkrt_trace_stats;
+
 typedef struct vkrt_trace_desc {
     vkrt_traversal traversal;     /* default: BVH */
     bool any_hit;                 /* false (default): the closest hit; true: occlusion queries, the
@@ -527,6 +541,8 @@ typedef struct vkrt_trace_desc {
     vkrt_progress_fn progress;    /* NULL (default): none; called between submissions (GPU) or
                                      blocks of rays (CPU) */
     void *progress_user;
+    vkrt_trace_stats *out_stats;  /* NULL (default): none; else written when the call returns
+                                     VKRT_OK */
 } vkrt_trace_desc;
 
 /* The primary rays vkrt_render() traces for an image of width x height seen by camera (NULL:

@@ -641,11 +641,31 @@ static void gpu_trace_rays_answer_rays_missing_the_scene_box_on_the_host(void)
     }
     fprintf(stderr, "  %zu of %zu rays may enter the box\n", enter, n);
     CHECK(enter > n / 5 && enter < n - n / 4);
+    /* What each call reports (vkrt_trace_stats): the rays the host answered are exactly those
+     * that cannot enter the box, on a CPU device through the BVH only. */
+    const bool cpu_device = gpu->vk->properties.deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU;
     for (int any = 0; rays && any <= 1; any++) {
-        vkrt_trace_desc d = { .any_hit = any != 0 };
-        vkrt_hit *g = trace_all(gpu, sg, &d, rays, n), *c = trace_all(cpu, sc, &d, rays, n);
+        vkrt_trace_stats sg_stats, sc_stats, gn_stats;
+        memset(&sg_stats, 0xA5, sizeof sg_stats);
+        vkrt_trace_desc d = { .any_hit = any != 0, .out_stats = &sg_stats };
+        vkrt_hit *g = trace_all(gpu, sg, &d, rays, n);
+        d.out_stats = &sc_stats;
+        vkrt_hit *c = trace_all(cpu, sc, &d, rays, n);
         d.traversal = VKRT_TRAVERSAL_NAIVE;
+        d.out_stats = &gn_stats;
         vkrt_hit *gn = trace_all(gpu, sg, &d, rays, n);
+        fprintf(stderr, "  any hit %d: GPU BVH %llu rays culled, %u submissions, %.2f of %.2f ms on the device\n", any,
+                (unsigned long long)sg_stats.rays_culled, sg_stats.submissions, sg_stats.trace_ms, sg_stats.total_ms);
+        CHECK_EQ_U64(sg_stats.rays, n);
+        CHECK_EQ_U64(sg_stats.rays_culled, cpu_device ? n - enter : 0);
+        CHECK_EQ_U64(gn_stats.rays_culled, 0);
+        CHECK_EQ_U64(sc_stats.rays_culled, 0);
+        const uint32_t chunk = gpu->vk->trace_budget ? VKRT_RESUME_RAY_CHUNK : VKRT_RAY_CHUNK;
+        CHECK(sg_stats.submissions >= core_div_up((uint32_t)(n - sg_stats.rays_culled), chunk));
+        CHECK(gn_stats.submissions >= core_div_up((uint32_t)n, VKRT_RAY_CHUNK) && sc_stats.submissions == 0);
+        CHECK(sg_stats.trace_ms >= 0.0 && sg_stats.trace_ms <= sg_stats.total_ms);
+        CHECK(!gpu->vk->timestamps || sg_stats.trace_ms > 0.0);
+        CHECK(sc_stats.rays == n && sc_stats.trace_ms > 0.0 && sc_stats.trace_ms <= sc_stats.total_ms);
         size_t hits = 0, same = 0;
         for (size_t i = 0; i < n; i++) {
             hits += g[i].prim_id != VKRT_NO_HIT;
@@ -668,8 +688,16 @@ static void gpu_trace_rays_answer_rays_missing_the_scene_box_on_the_host(void)
     vkrt_hit away_hits[5];
     for (int i = 0; i < 5; i++) away[i] = (vkrt_ray){ .origin = { 0.0f, 0.0f, 2.0f + (float)i }, .dir = { 0.0f, 0.1f * (float)i, 1.0f } };
     memset(away_hits, 0x5A, sizeof away_hits);
-    CHECK(vkrt_trace_rays(gpu, sg, &(vkrt_trace_desc){ 0 }, away, 5, away_hits) == VKRT_OK);
+    vkrt_trace_stats away_stats;
+    CHECK(vkrt_trace_rays(gpu, sg, &(vkrt_trace_desc){ .out_stats = &away_stats }, away, 5, away_hits) == VKRT_OK);
     for (int i = 0; i < 5; i++) CHECK(away_hits[i].t == -1.0f && away_hits[i].prim_id == VKRT_NO_HIT && away_hits[i].u == 0.0f);
+    CHECK(away_stats.rays == 5 && away_stats.rays_culled == (cpu_device ? 5u : 0u));
+    CHECK(!cpu_device || (away_stats.submissions == 0 && away_stats.trace_ms == 0.0));
+    /* No rays: a call that does nothing reports nothing. */
+    vkrt_trace_stats none;
+    memset(&none, 0xA5, sizeof none);
+    CHECK(vkrt_trace_rays(gpu, sg, &(vkrt_trace_desc){ .out_stats = &none }, NULL, 0, NULL) == VKRT_OK);
+    CHECK(none.rays == 0 && none.rays_culled == 0 && none.submissions == 0 && none.trace_ms == 0.0);
     free(rays);
     vkrt_scene_destroy(sg);
     vkrt_scene_destroy(sc);
