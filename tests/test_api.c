@@ -7,33 +7,12 @@
 #include <unistd.h>
 
 #include "check.h"
+#include "failing_alloc.h"
 #include "vkrt.h"
 
 /* ---- an allocator that counts live blocks and fails one chosen allocation ---- */
 
-typedef struct failing_allocator {
-    long calls;   /* allocations since the last arm() */
-    long fail_at; /* 1-based allocation to refuse; 0: none */
-    long live;    /* blocks allocated and not yet freed */
-} failing_allocator;
-
 static failing_allocator fa;
-
-static void *failing_alloc(void *user, size_t size)
-{
-    failing_allocator *f = user;
-    if (++f->calls == f->fail_at) return NULL;
-    void *p = malloc(size);
-    if (p) f->live++;
-    return p;
-}
-
-static void failing_free(void *user, void *pointer)
-{
-    failing_allocator *f = user;
-    f->live--;
-    free(pointer);
-}
 
 static void arm(long n)
 {
@@ -51,7 +30,7 @@ static vkrt_context_desc context_desc(vkrt_backend backend)
     return (vkrt_context_desc){
         .backend = backend,
         .cpu_threads = 2,
-        .allocator = { .alloc = failing_alloc, .free = failing_free, .user = &fa },
+        .allocator = failing_allocator_use(&fa),
     };
 }
 

@@ -8,6 +8,7 @@
 #include <unistd.h>
 
 #include "check.h"
+#include "failing_alloc.h"
 #include "mesh.h"
 #include "scene_pack.h"
 #include "texture.h"
@@ -819,27 +820,6 @@ static void builtin_scene_is_large_finite_unit_normalled_and_outward(void)
 
 /* ---- allocation failure ---------------------------------------------------------------- */
 
-typedef struct failing_allocator {
-    long allocations, live, fail_at; /* fail_at < 0: never */
-    size_t min_size;                 /* only allocations this large count and fail */
-} failing_allocator;
-
-static void *failing_alloc(void *user, size_t size)
-{
-    failing_allocator *a = user;
-    if (size >= a->min_size && a->fail_at >= 0 && a->allocations++ == a->fail_at) return NULL;
-    void *p = malloc(size);
-    if (p) a->live++;
-    return p;
-}
-
-static void failing_free(void *user, void *pointer)
-{
-    failing_allocator *a = user;
-    a->live--;
-    free(pointer);
-}
-
 /* cgltf 1.12 itself crashes when an allocation fails half-way through parsing (it records
  * an attribute count before allocating the attributes, then frees count entries of a NULL
  * array), so glTF files only have their large allocations failed: the file and token
@@ -859,9 +839,10 @@ static void every_allocation_failure_is_out_of_memory_and_leaks_nothing(void)
     for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
         const char *name = cases[i].path ? cases[i].path : "built-in scene";
         for (long n = 0;; n++) {
-            failing_allocator a = { .fail_at = n, .min_size = cases[i].min_size };
+            failing_allocator a = { .fail_at = n + 1, .min_size = cases[i].min_size }; /* n: 0-based */
             core c;
-            core_init(&c, &(vkrt_allocator){ .alloc = failing_alloc, .free = failing_free, .user = &a }, NULL, NULL);
+            const vkrt_allocator allocator = failing_allocator_use(&a);
+            core_init(&c, &allocator, NULL, NULL);
             mesh m;
             vkrt_result r = cases[i].path ? mesh_load(&c, cases[i].path, &m) : mesh_make_builtin(&c, &m);
             if (r == VKRT_OK) {

@@ -7,29 +7,10 @@
 
 #include "check.h"
 #include "core.h"
+#include "failing_alloc.h"
 #include "tls_pin.h"
 
 static const char *static_module, *dynamic_module;
-
-typedef struct counting_allocator {
-    long calls, fail_at, live;
-} counting_allocator;
-
-static void *counting_alloc(void *user, size_t size)
-{
-    counting_allocator *a = user;
-    if (++a->calls == a->fail_at) return NULL;
-    void *p = malloc(size);
-    if (p) a->live++;
-    return p;
-}
-
-static void counting_free(void *user, void *pointer)
-{
-    counting_allocator *a = user;
-    a->live--;
-    free(pointer);
-}
 
 static bool still_loaded(const char *path)
 {
@@ -57,9 +38,10 @@ static void out_of_memory_pins_nothing_and_leaks_nothing(void)
 {
     void *st, *dy;
     if (!load_modules(&st, &dy)) return;
-    counting_allocator counts = { .fail_at = 1 };
+    failing_allocator counts = { .fail_at = 1 };
     core c;
-    core_init(&c, &(vkrt_allocator){ .alloc = counting_alloc, .free = counting_free, .user = &counts }, NULL, NULL);
+    const vkrt_allocator allocator = failing_allocator_use(&counts);
+    core_init(&c, &allocator, NULL, NULL);
     CHECK(tls_pin_static_libraries(&c) == VKRT_ERROR_OUT_OF_MEMORY);
     CHECK(strstr(c.last_error, "static TLS") != NULL);
     CHECK_EQ_U64(counts.live, 0);
@@ -74,9 +56,10 @@ static void static_tls_libraries_stay_loaded(void)
 {
     void *st, *dy;
     if (!load_modules(&st, &dy)) return;
-    counting_allocator counts = { 0 };
+    failing_allocator counts = { 0 };
     core c;
-    core_init(&c, &(vkrt_allocator){ .alloc = counting_alloc, .free = counting_free, .user = &counts }, NULL, NULL);
+    const vkrt_allocator allocator = failing_allocator_use(&counts);
+    core_init(&c, &allocator, NULL, NULL);
     CHECK(tls_pin_static_libraries(&c) == VKRT_OK);
     CHECK_MSG(counts.calls >= 2, "%ld allocations: the static-TLS module was not listed", counts.calls);
     CHECK_EQ_U64(counts.live, 0);
