@@ -61,7 +61,8 @@ static void static_tls_libraries_stay_loaded(void)
     const vkrt_allocator allocator = failing_allocator_use(&counts);
     core_init(&c, &allocator, NULL, NULL);
     CHECK(tls_pin_static_libraries(&c) == VKRT_OK);
-    CHECK_MSG(counts.calls >= 2, "%ld allocations: the static-TLS module was not listed", counts.calls);
+    /* The list goes through the context's allocator (a name and the array at least). */
+    CHECK_MSG(counts.calls >= 2, "%ld allocations through the context's allocator", counts.calls);
     CHECK_EQ_U64(counts.live, 0);
     dlclose(st);
     dlclose(dy);
