@@ -712,10 +712,9 @@ vkrt_result vkrt_trace_rays(vkrt_context *ctx, vkrt_scene *scene, const vkrt_tra
         };
         if ((r = ensure_surfaces(scene, false)) == VKRT_OK)
             r = ensure_arrays(scene, gpu_trace_rays_arrays(&scene->gpu, traversal));
-        gpu_ray_counts counts = { 0 };
-        if (r == VKRT_OK) r = gpu_trace_rays(ctx->vk, &scene->gpu, &p, rays, count, out_hits, &counts);
-        stats.trace_ms = counts.device_ms;
-        stats.rays_culled = counts.culled;
+        trace_counts counts = { 0 };
+        if (r == VKRT_OK) r = gpu_trace_rays(ctx->vk, &scene->gpu, &p, rays, count, out_hits, &stats.trace_ms, &counts);
+        stats.rays_culled = counts.rays_culled;
         stats.submissions = counts.submissions;
     } else {
         cpu_trace_scene s = cpu_scene_of(scene);

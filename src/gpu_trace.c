@@ -1341,7 +1341,8 @@ static void ray_chunk_collect(ray_call *call, ray_chunk *c)
 }
 
 vkrt_result gpu_trace_rays(vk_context *vk, const gpu_scene *scene, const gpu_trace_rays_params *params,
-                           const vkrt_ray *rays, size_t count, vkrt_hit *out_hits, gpu_ray_counts *out_counts)
+                           const vkrt_ray *rays, size_t count, vkrt_hit *out_hits, double *out_device_ms,
+                           trace_counts *out_counts)
 {
     assert(arrays_uploaded(scene, gpu_trace_rays_arrays(scene, params->traversal)));
     ray_call call = { .vk = vk, .scene = scene, .params = params, .rays = rays, .count = count, .out_hits = out_hits };
@@ -1393,8 +1394,9 @@ vkrt_result gpu_trace_rays(vk_context *vk, const gpu_scene *scene, const gpu_tra
     if (r == VKRT_OK && params->progress) params->progress(params->progress_user, "trace", 1.0f);
     ray_chunk_destroy(vk, &chunks[0]);
     ray_chunk_destroy(vk, &chunks[1]);
-    *out_counts = (gpu_ray_counts){ .device_ms = call.device_ms, .culled = call.culled,
-                                    .submissions = call.pacer.submissions };
+    *out_device_ms = call.device_ms;
+    *out_counts = (trace_counts){ .submissions = call.pacer.submissions,
+                                  .longest_submission_ms = call.pacer.longest_ms, .rays_culled = call.culled };
     return r;
 }
 

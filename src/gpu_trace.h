@@ -129,18 +129,13 @@ typedef struct gpu_trace_rays_params {
  * wavefront's shade stage reads the triangles besides). */
 uint32_t gpu_trace_rays_arrays(const gpu_scene *scene, vkrt_traversal traversal);
 
-/* What a gpu_trace_rays call did (vkrt_trace_stats). */
-typedef struct gpu_ray_counts {
-    double device_ms;      /* the trace passes' device time (timestamp queries) */
-    uint64_t culled;       /* rays answered on the host, as missing the scene's box */
-    uint32_t submissions;
-} gpu_ray_counts;
-
 /* The closest hit of each ray (see vkrt_trace_rays), VKRT_RAY_CHUNK rays per submission
- * (VKRT_RESUME_RAY_CHUNK with a loop budget, plus resume submissions while any is unfinished),
- * and what it took into *out_counts. */
+ * (VKRT_RESUME_RAY_CHUNK with a loop budget, plus resume submissions while any is unfinished);
+ * the passes' device time into *out_device_ms, the submissions and culled rays into *out_counts,
+ * as gpu_trace_render reports a render's. */
 vkrt_result gpu_trace_rays(vk_context *vk, const gpu_scene *scene, const gpu_trace_rays_params *params,
-                           const vkrt_ray *rays, size_t count, vkrt_hit *out_hits, gpu_ray_counts *out_counts);
+                           const vkrt_ray *rays, size_t count, vkrt_hit *out_hits, double *out_device_ms,
+                           trace_counts *out_counts);
 
 /* The wavefront's traversal passes (the lighting modes): a ray buffer on the device that
  * shade.comp fills and trace.comp's wavefront variant traces, closest-hit or (params->any_hit)

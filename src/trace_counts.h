@@ -1,5 +1,6 @@
 /* Traversal counters of a render, summed over its primary rays (vkrt_render_stats): what the
- * heat map shows per pixel, in total. Both backends fill one. */
+ * heat map shows per pixel, in total. Both backends fill one; the GPU's vkrt_trace_rays fills
+ * its submissions and culled rays (vkrt_trace_stats). */
 #ifndef VKRT_TRACE_COUNTS_H
 #define VKRT_TRACE_COUNTS_H
 
@@ -14,6 +15,8 @@ typedef struct trace_counts {
     uint64_t bounce_rays; /* lighting modes: closest-hit rays after the primary ones */
     uint32_t submissions; /* GPU: device submissions (gpu_pace.h sizes them) */
     double longest_submission_ms; /* GPU: wall-clock time of the longest */
+    uint64_t rays_culled; /* vkrt_trace_rays on a CPU device: rays the host answered as missing
+                             the scene's box */
 } trace_counts;
 
 #endif
