@@ -10,6 +10,7 @@
 #include <stdbool.h>
 
 #include "cpu_integrate.h"
+#include "ray4.h"
 #include "scene_pack.h"
 #include "texture.h"
 #include "work_pool.h"
@@ -360,13 +361,15 @@ static bool run_tile(job *j, size_t t)
     return true;
 }
 
-/* A float hit as vkrt_trace_rays returns it: the distance refined in double along r. */
-static vkrt_hit public_hit_f(const cpu_trace_scene *s, const ray_f *r, hit best)
+/* A float hit as vkrt_trace_rays returns it: the distance refined in double along r. Takes
+ * the hit by pointer: a packet's hits, copied into a by-value struct for the call, were read
+ * back from the stack before their stores had retired (half of trace_packet's samples). */
+static vkrt_hit public_hit_f(const cpu_trace_scene *s, const ray_f *r, const hit_f *best)
 {
-    if (best.prim == NO_PRIM) return cpu_trace_miss();
-    best.t = refine_hit_distance((vec3_d){ r->origin.x, r->origin.y, r->origin.z }, (vec3_d){ r->dir.x, r->dir.y, r->dir.z },
-                                 r->tmin, r->tmax, &s->tris[best.tri], best.t);
-    return (vkrt_hit){ .t = best.t, .prim_id = best.prim, .u = best.u, .v = best.v };
+    if (best->prim == NO_PRIM) return cpu_trace_miss();
+    float t = refine_hit_distance((vec3_d){ r->origin.x, r->origin.y, r->origin.z }, (vec3_d){ r->dir.x, r->dir.y, r->dir.z },
+                                  r->tmin, r->tmax, &s->tris[best->tri], best->t);
+    return (vkrt_hit){ .t = t, .prim_id = best->prim, .u = best->u, .v = best->v };
 }
 
 static vkrt_hit trace_one_ray(const job *j, const vkrt_ray *in)
@@ -382,7 +385,8 @@ static vkrt_hit trace_one_ray(const job *j, const vkrt_ray *in)
     }
     ray_f r;
     if (!ray_from_buffer_f(in, &r)) return cpu_trace_miss();
-    return public_hit_f(j->scene, &r, trace_float(j->scene, p->traversal, p->intersector, &r, &heat, p->any_hit, false));
+    best = trace_float(j->scene, p->traversal, p->intersector, &r, &heat, p->any_hit, false);
+    return public_hit_f(j->scene, &r, &(hit_f){ best.t, best.u, best.v, best.tri, best.prim });
 }
 
 /* Rays [i, i + 4) as one packet where they are valid and coherent (cpu_trace_packet4.h);
@@ -392,14 +396,9 @@ static bool trace_packet(const job *j, size_t i)
     const cpu_trace_rays_params *p = j->rays_params;
     if (!packet4_coherent(&j->rays[i])) return false;
     packet4 packet;
-    for (int l = 0; l < PACKET4_LANES; l++)
-        if (!ray_from_buffer_f(&j->rays[i + l], &packet.ray[l])) return false;
-    packet4_setup(&packet);
+    if (!packet4_load(&j->rays[i], &packet)) return false;
     trace_packet4_f(j->scene, p->intersector, p->any_hit, &packet);
-    for (int l = 0; l < PACKET4_LANES; l++) {
-        const hit_f *b = &packet.best[l];
-        j->hits[i + l] = public_hit_f(j->scene, &packet.ray[l], (hit){ b->t, b->u, b->v, b->tri, b->prim });
-    }
+    for (int l = 0; l < PACKET4_LANES; l++) j->hits[i + l] = public_hit_f(j->scene, &packet.ray[l], &packet.best[l]);
     return true;
 }
 

@@ -34,26 +34,89 @@ typedef struct packet4_item {
     unsigned mask;
 } packet4_item;
 
-/* Fills p's lane constants from p->ray (each as ray_from_buffer_f made it). The vectors are
- * put together in registers: four scalar stores read back as one vector would each miss the
+/* The lane constants that follow from p->inv_dir and the rays' tmax: no hit yet, the lanes
+ * parallel to each axis, and per lane the prune bound of the closest hit so far
+ * (prune_bound_f): what boxes and stack entries are held to. */
+static void packet4_lanes_start(packet4 *p, const float tmax[PACKET4_LANES])
+{
+    for (int l = 0; l < PACKET4_LANES; l++) p->best[l] = (hit_f){ .t = tmax[l], .tri = NO_PRIM, .prim = NO_PRIM };
+    for (int a = 0; a < 3; a++) p->parallel[a] = f4_eq(f4_abs(p->inv_dir[a]), f4_set1(INFINITY));
+    p->any_parallel = f4_bits(f4_or(f4_or(p->parallel[0], p->parallel[1]), p->parallel[2])) != 0;
+    p->best_t = f4_set(prune_bound_f(tmax[0]), prune_bound_f(tmax[1]), prune_bound_f(tmax[2]), prune_bound_f(tmax[3]));
+}
+
+/* Fills p's lane constants from p->ray (each as ray_setup_f made it). The vectors are put
+ * together in registers: four scalar stores read back as one vector would each miss the
  * store forwarding. */
 static void packet4_setup(packet4 *p)
 {
     const ray_f *r = p->ray;
-    for (int l = 0; l < PACKET4_LANES; l++) p->best[l] = (hit_f){ .t = r[l].tmax, .tri = NO_PRIM, .prim = NO_PRIM };
     p->origin[0] = f4_set(r[0].origin.x, r[1].origin.x, r[2].origin.x, r[3].origin.x);
     p->origin[1] = f4_set(r[0].origin.y, r[1].origin.y, r[2].origin.y, r[3].origin.y);
     p->origin[2] = f4_set(r[0].origin.z, r[1].origin.z, r[2].origin.z, r[3].origin.z);
     p->inv_dir[0] = f4_set(r[0].inv_dir.x, r[1].inv_dir.x, r[2].inv_dir.x, r[3].inv_dir.x);
     p->inv_dir[1] = f4_set(r[0].inv_dir.y, r[1].inv_dir.y, r[2].inv_dir.y, r[3].inv_dir.y);
     p->inv_dir[2] = f4_set(r[0].inv_dir.z, r[1].inv_dir.z, r[2].inv_dir.z, r[3].inv_dir.z);
-    for (int a = 0; a < 3; a++) p->parallel[a] = f4_eq(f4_abs(p->inv_dir[a]), f4_set1(INFINITY));
-    p->any_parallel = f4_bits(f4_or(f4_or(p->parallel[0], p->parallel[1]), p->parallel[2])) != 0;
     p->tmin = f4_set(r[0].tmin, r[1].tmin, r[2].tmin, r[3].tmin);
-    /* Per lane the prune bound of the closest hit so far (prune_bound_f): what boxes and stack
-     * entries are held to. */
-    p->best_t = f4_set(prune_bound_f(r[0].tmax), prune_bound_f(r[1].tmax), prune_bound_f(r[2].tmax),
-                       prune_bound_f(r[3].tmax));
+    const float tmax[PACKET4_LANES] = { r[0].tmax, r[1].tmax, r[2].tmax, r[3].tmax };
+    packet4_lanes_start(p, tmax);
+}
+
+/* p from four buffer rays: each lane's ray as ray_from_buffer_f makes it and the lane
+ * constants as packet4_setup makes them, bit for bit, but with the twelve reciprocals and
+ * shears divided four lanes at a time (a division rounds alike at either width; one ray's six
+ * scalar divisions and axis choice took 6% of the CPU's primary rays). False, with p unusable,
+ * where one of the rays must miss (ray_from_buffer_f's checks). */
+static bool packet4_load(const vkrt_ray rays[PACKET4_LANES], packet4 *p)
+{
+    float4 o[4], d[4];
+    ray4_load(rays, o, d);
+    if (f4_bits(ray4_valid(o, d)) != PACKET4_ALL) return false;
+    const float4 one = f4_set1(1.0f), zero = f4_set1(0.0f);
+    for (int a = 0; a < 3; a++) {
+        p->origin[a] = o[a];
+        p->inv_dir[a] = f4_div(one, d[a]);
+    }
+    p->tmin = o[3];
+    /* ray_setup_f's watertight axes: kz that of the largest |dir| (the lower axis on a tie),
+     * kx and ky the next two in turn, swapped where dir[kz] < 0; then the shear. */
+    const float4 ax = f4_abs(d[0]), ay = f4_abs(d[1]), az = f4_abs(d[2]);
+    const float4 z_is_x = f4_and(f4_ge(ax, ay), f4_ge(ax, az)), z_is_y = f4_andnot(z_is_x, f4_ge(ay, az));
+    const float4 dz = f4_select(z_is_x, d[0], f4_select(z_is_y, d[1], d[2]));
+    const float4 next = f4_select(z_is_x, d[1], f4_select(z_is_y, d[2], d[0]));
+    const float4 after = f4_select(z_is_x, d[2], f4_select(z_is_y, d[0], d[1]));
+    const float4 flip = f4_lt(dz, zero);
+    float shear[3][PACKET4_LANES], org[3][PACKET4_LANES], dir[3][PACKET4_LANES], inv[3][PACKET4_LANES],
+        tmin[PACKET4_LANES], tmax[PACKET4_LANES];
+    f4_store(shear[0], f4_div(f4_select(flip, after, next), dz));
+    f4_store(shear[1], f4_div(f4_select(flip, next, after), dz));
+    f4_store(shear[2], f4_div(one, dz));
+    for (int a = 0; a < 3; a++) {
+        f4_store(org[a], o[a]);
+        f4_store(dir[a], d[a]);
+        f4_store(inv[a], p->inv_dir[a]);
+    }
+    f4_store(tmin, o[3]);
+    f4_store(tmax, f4_select(f4_eq(d[3], zero), f4_set1(INFINITY), d[3]));
+    const unsigned x_bits = f4_bits(z_is_x), y_bits = f4_bits(z_is_y), flip_bits = f4_bits(flip);
+    for (int l = 0; l < PACKET4_LANES; l++) {
+        ray_f *r = &p->ray[l];
+        r->origin = (vec3_f){ org[0][l], org[1][l], org[2][l] };
+        r->dir = (vec3_f){ dir[0][l], dir[1][l], dir[2][l] };
+        r->inv_dir = (vec3_f){ inv[0][l], inv[1][l], inv[2][l] };
+        r->tmin = tmin[l];
+        r->tmax = tmax[l];
+        r->kz = x_bits >> l & 1u ? 0u : (y_bits >> l & 1u ? 1u : 2u);
+        uint32_t kx = r->kz == 2u ? 0u : r->kz + 1u, ky = kx == 2u ? 0u : kx + 1u;
+        const bool swap = flip_bits >> l & 1u;
+        r->kx = swap ? ky : kx;
+        r->ky = swap ? kx : ky;
+        r->sx = shear[0][l];
+        r->sy = shear[1][l];
+        r->sz = shear[2][l];
+    }
+    packet4_lanes_start(p, tmax);
+    return true;
 }
 
 /* slab_f for the four lanes on one box plane pair (lo, hi broadcast). */

@@ -6,10 +6,7 @@
 
 #include "cpu_trace.h"
 #include "float4.h"
-
-_Static_assert(sizeof(vkrt_ray) == 8 * sizeof(float) && offsetof(vkrt_ray, tmin) == 3 * sizeof(float) &&
-                   offsetof(vkrt_ray, dir) == 4 * sizeof(float) && offsetof(vkrt_ray, tmax) == 7 * sizeof(float),
-               "vkrt_ray is read as two rows of four floats");
+#include "ray4.h"
 
 /* intersect_box_f of src/cpu_trace_real.h on four rays against one box, operation for
  * operation (f_min_f(x, y) is f4_min(y, x), f_max_f(x, y) is f4_max(y, x): see
@@ -17,16 +14,10 @@ _Static_assert(sizeof(vkrt_ray) == 8 * sizeof(float) && offsetof(vkrt_ray, tmin)
  * test's, NaN, infinities and +-0 included. */
 unsigned ray_cull_test4(const vkrt_ray rays[4], const vkrt_gpu_node *box)
 {
-    /* origin[3], tmin and dir[3], tmax: two rows a ray, four columns once transposed. */
-    const float *f = (const float *)(const void *)rays;
-    float4 o[4] = { f4_load(f), f4_load(f + 8), f4_load(f + 16), f4_load(f + 24) };
-    float4 d[4] = { f4_load(f + 4), f4_load(f + 12), f4_load(f + 20), f4_load(f + 28) };
-    f4_transpose(o);
-    f4_transpose(d);
+    float4 o[4], d[4];
+    ray4_load(rays, o, d);
+    const float4 valid = ray4_valid(o, d);
     const float4 inf = f4_set1(INFINITY), minus_inf = f4_set1(-INFINITY), zero = f4_set1(0.0f);
-    float4 valid = f4_mask(0xFu);
-    for (int a = 0; a < 3; a++) valid = f4_and(valid, f4_and(f4_lt(f4_abs(o[a]), inf), f4_lt(f4_abs(d[a]), inf)));
-    valid = f4_andnot(f4_and(f4_and(f4_eq(d[0], zero), f4_eq(d[1], zero)), f4_eq(d[2], zero)), valid);
     const float lo[3] = { box->bmin.x, box->bmin.y, box->bmin.z }, hi[3] = { box->bmax.x, box->bmax.y, box->bmax.z };
     float4 near[3], far[3];
     for (int a = 0; a < 3; a++) {

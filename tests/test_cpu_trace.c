@@ -1449,6 +1449,100 @@ static void bvh4_and_binary_traversal_give_identical_hits(void)
     }
 }
 
+/* Four coherent rays from the buffer go through the 4-wide BVH as a packet (packet4_load: the
+ * rays' reciprocals, watertight axes and shears divided four lanes at a time); the binary BVH
+ * traces them one by one (ray_from_buffer_f). Both must answer bit for bit alike where the
+ * setup has its cases: directions along each axis with either sign (kz and the swap of kx and
+ * ky), components of +-0 and denormals (parallel lanes, infinite reciprocals), ties between
+ * the largest components, every kind of tmin and tmax, and groups with a ray that must miss
+ * (which leave the packet path). */
+static void packets_answer_as_single_rays_on_axis_and_edge_directions(void)
+{
+    const float tiny[] = { 0.0f, -0.0f, 1e-3f, -1e-3f, 2e-2f, -2e-2f, 1e-40f, -1e-40f };
+    const float spans[][2] = { { 0.0f, 0.0f }, { 0.0f, 0.5f }, { 0.2f, 0.0f }, { 0.0f, 1.4f }, { 1.0f, 2.0f } };
+    const size_t nt = sizeof tiny / sizeof tiny[0], ns = sizeof spans / sizeof spans[0];
+    const char *files[2] = { "bunny.obj", "dragon_11k.obj" };
+    for (int f = 0; f < 2; f++) {
+        vkrt_scene *model = model_scene(files[f]);
+        if (!model) continue;
+        cpu_trace_scene binary, wide;
+        scene_views(model, &binary, &wide);
+        enum { GROUPS = 3000, TAIL = 64 };
+        const size_t n = (size_t)(GROUPS + TAIL) * 4;
+        vkrt_ray *rays = calloc(n, sizeof *rays);
+        vkrt_hit *hb = calloc(n, sizeof *hb), *hw = calloc(n, sizeof *hw);
+        if (!rays || !hb || !hw) abort();
+        test_rng rng = { 31 + (uint64_t)f };
+        size_t zero_lanes = 0, tie_rays = 0;
+        for (size_t g = 0; g < GROUPS + TAIL; g++) {
+            /* From outside the unit box along axis a (either side), towards the scene, or
+             * along a diagonal where two components tie. */
+            const int a = (int)(g % 3), side = (int)(g / 3 % 2) ? 1 : -1, diagonal = g % 7 == 0;
+            float o[3] = { 0.0f, 0.0f, 0.0f }, base[3] = { 0.0f, 0.0f, 0.0f };
+            o[a] = 1.5f * (float)side;
+            o[(a + 1) % 3] = (float)(0.3 * (rng_uniform(&rng) - 0.5));
+            base[a] = -(float)side;
+            if (diagonal) {
+                /* Through the middle of the scene at 45 degrees: |dir| ties on axes a and a + 1. */
+                base[(a + 1) % 3] = (g / 14 % 2) ? 1.0f : -1.0f;
+                o[a] = 0.8f * (float)side;
+                o[(a + 1) % 3] += -0.8f * base[(a + 1) % 3];
+            }
+            const float *span = spans[g % ns];
+            for (int l = 0; l < 4; l++) {
+                vkrt_ray *r = &rays[g * 4 + (size_t)l];
+                memcpy(r->origin, o, sizeof o);
+                for (int k = 0; k < 3; k++) r->dir[k] = base[k];
+                /* Lane offsets small enough for one packet (PACKET4_MIN_COSINE). */
+                const int b = (a + 2) % 3, c2 = diagonal ? a : (a + 1) % 3;
+                r->dir[b] += tiny[(size_t)(rng_uniform(&rng) * (double)nt) % nt];
+                if (!diagonal) r->dir[c2] += tiny[(size_t)(rng_uniform(&rng) * (double)nt) % nt];
+                r->tmin = span[0];
+                r->tmax = span[1];
+                for (int k = 0; k < 3; k++) zero_lanes += r->dir[k] == 0.0f;
+                tie_rays += diagonal;
+            }
+            if (g >= GROUPS) {
+                /* The tail: one ray of the group must miss, so the group leaves the packet path. */
+                vkrt_ray *r = &rays[g * 4 + (size_t)(g % 4)];
+                switch (g % 3) {
+                case 0: r->dir[0] = NAN; break;
+                case 1: r->dir[0] = r->dir[1] = r->dir[2] = 0.0f; break;
+                default: r->origin[1] = INFINITY; break;
+                }
+            }
+        }
+        for (int isect = VKRT_INTERSECTOR_WATERTIGHT; isect <= VKRT_INTERSECTOR_MOLLER_TRUMBORE; isect++) {
+            for (int any = 0; any < 2; any++) {
+                cpu_trace_rays_params p = { .traversal = VKRT_TRAVERSAL_BVH, .any_hit = any,
+                                            .intersector = (vkrt_intersector)isect, .threads = 2 };
+                CHECK(cpu_trace_rays(&c, &binary, &p, rays, n, hb) == VKRT_OK);
+                CHECK(cpu_trace_rays(&c, &wide, &p, rays, n, hw) == VKRT_OK);
+                size_t hits = 0, tie_hits = 0, differ = 0;
+                for (size_t i = 0; i < n; i++) {
+                    hits += hb[i].prim_id != VKRT_NO_HIT;
+                    tie_hits += i / 4 % 7 == 0 && hb[i].prim_id != VKRT_NO_HIT;
+                    const bool same = any ? (hb[i].prim_id == VKRT_NO_HIT) == (hw[i].prim_id == VKRT_NO_HIT)
+                                          : memcmp(&hb[i], &hw[i], sizeof hb[i]) == 0;
+                    if (!same && differ++ < 3)
+                        fprintf(stderr, "  ray %zu: single tri %u t %.9g, packet tri %u t %.9g\n", i, hb[i].prim_id,
+                                hb[i].t, hw[i].prim_id, hw[i].t);
+                }
+                fprintf(stderr, "  %s isect %d any %d: %zu rays, %zu hit (%zu of %zu with tied components), %zu zero components, %zu differ\n",
+                        files[f], isect, any, n, hits, tie_hits, tie_rays, zero_lanes, differ);
+                CHECK_EQ_U64(differ, 0);
+                CHECK(hits > n / 4 && hits < n);
+                CHECK(tie_hits > tie_rays / 4);
+                CHECK(zero_lanes > n / 4);
+            }
+        }
+        free(rays);
+        free(hb);
+        free(hw);
+        vkrt_scene_destroy(model);
+    }
+}
+
 /* The x86-64-v3 build of the CPU tracer (cpu_trace_isa) answers as the baseline build bit for
  * bit: vkrt_trace_rays' hits through the 4-wide and the binary BVH, closest and any hit, float
  * and double, both intersectors, and the renders of the modes that read hits with their
@@ -1547,6 +1641,7 @@ int main(void)
     RUN(ray_cull_compact_keeps_order_and_stops_where_the_room_ends);
     RUN(watertight4_equals_scalar_watertight_on_hostile_triangles);
     RUN(bvh4_and_binary_traversal_give_identical_hits);
+    RUN(packets_answer_as_single_rays_on_axis_and_edge_directions);
     RUN(x86_64_v3_build_answers_as_the_baseline_bit_for_bit);
     RUN(double_reference_and_float_agree_on_camera_renders);
     RUN(eye_inside_a_closed_mesh_always_hits);
