@@ -65,8 +65,8 @@ static void packet4_setup(packet4 *p)
 /* p from four buffer rays: each lane's ray as ray_from_buffer_f makes it and the lane
  * constants as packet4_setup makes them, bit for bit, but with the twelve reciprocals and
  * shears divided four lanes at a time (a division rounds alike at either width; one ray's six
- * scalar divisions and axis choice took 6% of the CPU's primary rays). False, with p unusable,
- * where one of the rays must miss (ray_from_buffer_f's checks). */
+ * scalar divisions and axis choice held 6% of a profile of the CPU's primary rays). False,
+ * with p unusable, where one of the rays must miss (ray_from_buffer_f's checks). */
 static bool packet4_load(const vkrt_ray rays[PACKET4_LANES], packet4 *p)
 {
     float4 o[4], d[4];
