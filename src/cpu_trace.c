@@ -67,6 +67,16 @@ static bool alpha_passes(const cpu_trace_scene *s, uint32_t prim, float u, float
     return alpha >= m->alpha_cutoff;
 }
 
+/* The watertight test's other two axes for kz, the axis of the largest |dir| (Woop et al.,
+ * section 3): the next two in turn, swapped where dir[kz] < 0 so that the permutation keeps the
+ * winding. One definition for ray_setup_f/_d and the packets' four-lane setup. */
+static inline void watertight_axes(uint32_t kz, bool dir_kz_negative, uint32_t *out_kx, uint32_t *out_ky)
+{
+    uint32_t kx = kz == 2u ? 0u : kz + 1u, ky = kx == 2u ? 0u : kx + 1u;
+    *out_kx = dir_kz_negative ? ky : kx;
+    *out_ky = dir_kz_negative ? kx : ky;
+}
+
 #define REAL float
 #define R(name) name##_f
 #define REAL_IS_FLOAT 1

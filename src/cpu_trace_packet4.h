@@ -79,7 +79,7 @@ static bool packet4_load(const vkrt_ray rays[PACKET4_LANES], packet4 *p)
     }
     p->tmin = o[3];
     /* ray_setup_f's watertight axes: kz that of the largest |dir| (the lower axis on a tie),
-     * kx and ky the next two in turn, swapped where dir[kz] < 0; then the shear. */
+     * kx and ky from watertight_axes; then the shear. */
     const float4 ax = f4_abs(d[0]), ay = f4_abs(d[1]), az = f4_abs(d[2]);
     const float4 z_is_x = f4_and(f4_ge(ax, ay), f4_ge(ax, az)), z_is_y = f4_andnot(z_is_x, f4_ge(ay, az));
     const float4 dz = f4_select(z_is_x, d[0], f4_select(z_is_y, d[1], d[2]));
@@ -107,10 +107,7 @@ static bool packet4_load(const vkrt_ray rays[PACKET4_LANES], packet4 *p)
         r->tmin = tmin[l];
         r->tmax = tmax[l];
         r->kz = x_bits >> l & 1u ? 0u : (y_bits >> l & 1u ? 1u : 2u);
-        uint32_t kx = r->kz == 2u ? 0u : r->kz + 1u, ky = kx == 2u ? 0u : kx + 1u;
-        const bool swap = flip_bits >> l & 1u;
-        r->kx = swap ? ky : kx;
-        r->ky = swap ? kx : ky;
+        watertight_axes(r->kz, flip_bits >> l & 1u, &r->kx, &r->ky);
         r->sx = shear[0][l];
         r->sy = shear[1][l];
         r->sz = shear[2][l];

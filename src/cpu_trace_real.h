@@ -68,13 +68,7 @@ static R(ray) R(ray_setup)(R(vec3) origin, R(vec3) dir, REAL tmin, REAL tmax)
     r.tmax = tmax;
     REAL ax = R(f_abs)(dir.x), ay = R(f_abs)(dir.y), az = R(f_abs)(dir.z);
     r.kz = ax >= ay && ax >= az ? 0u : (ay >= az ? 1u : 2u);
-    r.kx = r.kz == 2u ? 0u : r.kz + 1u;
-    r.ky = r.kx == 2u ? 0u : r.kx + 1u;
-    if (R(v_get)(dir, r.kz) < 0) {
-        uint32_t k = r.kx;
-        r.kx = r.ky;
-        r.ky = k;
-    }
+    watertight_axes(r.kz, R(v_get)(dir, r.kz) < 0, &r.kx, &r.ky);
     REAL dz = R(v_get)(dir, r.kz);
     r.sx = R(v_get)(dir, r.kx) / dz;
     r.sy = R(v_get)(dir, r.ky) / dz;
