@@ -10,6 +10,7 @@
 #include <stdbool.h>
 
 #include "cpu_integrate.h"
+#include "float8.h"
 #include "ray4.h"
 #include "scene_pack.h"
 #include "texture.h"
@@ -69,7 +70,7 @@ static bool alpha_passes(const cpu_trace_scene *s, uint32_t prim, float u, float
 
 /* The watertight test's other two axes for kz, the axis of the largest |dir| (Woop et al.,
  * section 3): the next two in turn, swapped where dir[kz] < 0 so that the permutation keeps the
- * winding. One definition for ray_setup_f/_d and the packets' four-lane setup. */
+ * winding. One definition for ray_setup_f/_d and the packets' eight-lane setup. */
 static inline void watertight_axes(uint32_t kz, bool dir_kz_negative, uint32_t *out_kx, uint32_t *out_ky)
 {
     uint32_t kx = kz == 2u ? 0u : kz + 1u, ky = kx == 2u ? 0u : kx + 1u;
@@ -86,7 +87,7 @@ static inline void watertight_axes(uint32_t kz, bool dir_kz_negative, uint32_t *
 #include "cpu_trace_real.h"
 
 #include "cpu_trace_bvh4.h"
-#include "cpu_trace_packet4.h"
+#include "cpu_trace_packet8.h"
 
 #define REAL double
 #define R(name) name##_d
@@ -320,7 +321,7 @@ static void trace_pixel(const job *j, uint32_t x, uint32_t y, float out[4], trac
     counts->tris += heat.tris;
 }
 
-/* Whether a tile's rows go four pixels to a packet: float rays through the 4-wide BVH, which
+/* Whether a tile's rows go eight pixels to a packet: float rays through the 4-wide BVH, which
  * no counter watches (a camera's neighbouring pixels are always coherent). */
 static bool pixel_packets(const job *j)
 {
@@ -329,14 +330,14 @@ static bool pixel_packets(const job *j)
            !p->counters && p->mode != VKRT_MODE_HEATMAP;
 }
 
-/* Pixels (x, y) to (x + 3, y) as one packet into out (16 floats), each as trace_pixel gives it. */
-static void trace_pixels4(const job *j, uint32_t x, uint32_t y, float *out)
+/* Pixels (x, y) to (x + 7, y) as one packet into out (32 floats), each as trace_pixel gives it. */
+static void trace_pixels8(const job *j, uint32_t x, uint32_t y, float *out)
 {
-    packet4 packet;
-    for (uint32_t l = 0; l < PACKET4_LANES; l++) packet.ray[l] = camera_ray_f(&j->cam_f, x + l, y);
-    packet4_setup(&packet);
-    trace_packet4_f(j->scene, j->params->intersector, false, &packet);
-    for (uint32_t l = 0; l < PACKET4_LANES; l++) {
+    packet8 packet;
+    for (uint32_t l = 0; l < PACKET8_LANES; l++) packet.ray[l] = camera_ray_f(&j->cam_f, x + l, y);
+    packet8_setup(&packet);
+    trace_packet8_f(j->scene, j->params->intersector, false, &packet);
+    for (uint32_t l = 0; l < PACKET8_LANES; l++) {
         const hit_f *b = &packet.best[l];
         hit best = refine_pixel_hit(j, x + l, y, (hit){ b->t, b->u, b->v, b->tri, b->prim });
         shade(j->scene, j->params, &best, &(heat_counts){ 0 }, out + 4 * l);
@@ -354,8 +355,8 @@ static bool run_tile(job *j, size_t t)
         /* Checked per row so a cancel stops a slow (naive, large) tile early. */
         if (work_pool_cancelled(j->pool)) return false;
         uint32_t x = x0;
-        for (; packets && x + PACKET4_LANES <= x1; x += PACKET4_LANES)
-            trace_pixels4(j, x, y, j->out + ((size_t)y * width + x) * 4);
+        for (; packets && x + PACKET8_LANES <= x1; x += PACKET8_LANES)
+            trace_pixels8(j, x, y, j->out + ((size_t)y * width + x) * 4);
         for (; x < x1; x++) trace_pixel(j, x, y, j->out + ((size_t)y * width + x) * 4, &counts);
     }
     if (j->params->counters) {
@@ -399,16 +400,16 @@ static vkrt_hit trace_one_ray(const job *j, const vkrt_ray *in)
     return public_hit_f(j->scene, &r, &(hit_f){ best.t, best.u, best.v, best.tri, best.prim });
 }
 
-/* Rays [i, i + 4) as one packet where they are valid and coherent (cpu_trace_packet4.h);
+/* Rays [i, i + 8) as one packet where they are valid and coherent (cpu_trace_packet8.h);
  * false, with nothing written, where they are not. */
 static bool trace_packet(const job *j, size_t i)
 {
     const cpu_trace_rays_params *p = j->rays_params;
-    if (!packet4_coherent(&j->rays[i])) return false;
-    packet4 packet;
-    if (!packet4_load(&j->rays[i], &packet)) return false;
-    trace_packet4_f(j->scene, p->intersector, p->any_hit, &packet);
-    for (int l = 0; l < PACKET4_LANES; l++) j->hits[i + l] = public_hit_f(j->scene, &packet.ray[l], &packet.best[l]);
+    if (!packet8_coherent(&j->rays[i])) return false;
+    packet8 packet;
+    if (!packet8_load(&j->rays[i], &packet)) return false;
+    trace_packet8_f(j->scene, p->intersector, p->any_hit, &packet);
+    for (int l = 0; l < PACKET8_LANES; l++) j->hits[i + l] = public_hit_f(j->scene, &packet.ray[l], &packet.best[l]);
     return true;
 }
 
@@ -423,8 +424,8 @@ static bool run_ray_block(job *j, size_t block)
             if (work_pool_cancelled(j->pool)) return false;
             check = i + 64;
         }
-        if (packets && i + PACKET4_LANES <= end && trace_packet(j, i)) {
-            i += PACKET4_LANES;
+        if (packets && i + PACKET8_LANES <= end && trace_packet(j, i)) {
+            i += PACKET8_LANES;
             continue;
         }
         j->hits[i] = trace_one_ray(j, &j->rays[i]);

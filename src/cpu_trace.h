@@ -50,6 +50,8 @@ typedef struct cpu_trace_params {
 vkrt_result cpu_trace_render(core *c, const cpu_trace_scene *scene, const cpu_trace_params *params,
                              float *out_rgba, trace_counts *out_counts);
 
+#define CPU_TRACE_PACKET_LANES 8 /* rays a packet (src/cpu_trace_packet8.h) */
+
 typedef struct cpu_trace_rays_params {
     vkrt_traversal traversal;     /* resolved */
     bool any_hit;                 /* the first hit found, not the closest */
@@ -61,7 +63,9 @@ typedef struct cpu_trace_rays_params {
 } cpu_trace_rays_params;
 
 /* The closest hit of each ray (see vkrt_trace_rays), threads over blocks of rays. Returns as
- * cpu_trace_render. */
+ * cpu_trace_render. Float rays through the 4-wide BVH go CPU_TRACE_PACKET_LANES at a time as
+ * one packet where those rays, in buffer order, are valid and share an origin and nearly a
+ * direction (a camera's); the answers are the single rays' either way. */
 vkrt_result cpu_trace_rays(core *c, const cpu_trace_scene *scene, const cpu_trace_rays_params *params,
                            const vkrt_ray *rays, size_t count, vkrt_hit *out_hits);
 

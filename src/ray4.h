@@ -1,7 +1,7 @@
 /* Four vkrt_rays as the columns of float4 rows, and the rays among them that must miss: the
  * shared first step of the host's four-ray code (ray_cull.c's box test on the way into the
- * GPU's ray buffer, cpu_trace_packet4.h's packets), so that both read the rays alike and
- * reject what ray_from_buffer_f rejects. */
+ * GPU's ray buffer, cpu_trace_packet8.h's packets in two halves), so that both read the rays
+ * alike and reject what ray_from_buffer_f rejects. */
 #ifndef VKRT_RAY4_H
 #define VKRT_RAY4_H
 

@@ -1461,8 +1461,9 @@ static void bvh4_and_binary_traversal_give_identical_hits(void)
     }
 }
 
-/* Four coherent rays from the buffer go through the 4-wide BVH as a packet (packet4_load: the
- * rays' reciprocals, watertight axes and shears divided four lanes at a time); the binary BVH
+/* CPU_TRACE_PACKET_LANES coherent rays from the buffer go through the 4-wide BVH as a packet
+ * (packet8_load: the rays' reciprocals, watertight axes and shears divided eight lanes at a
+ * time, float8 one AVX register in the x86-64-v3 build, two halves in the baseline); the binary BVH
  * traces them one by one (ray_from_buffer_f). Both must answer bit for bit alike where the
  * setup has its cases: directions along each axis with either sign (kz and the swap of kx and
  * ky), components of +-0 and denormals (parallel lanes, infinite reciprocals), ties between
@@ -1479,8 +1480,8 @@ static void packets_answer_as_single_rays_on_axis_and_edge_directions(void)
         if (!model) continue;
         cpu_trace_scene binary, wide;
         scene_views(model, &binary, &wide);
-        enum { GROUPS = 3000, TAIL = 64 };
-        const size_t n = (size_t)(GROUPS + TAIL) * 4;
+        enum { GROUPS = 3000, TAIL = 64, L = CPU_TRACE_PACKET_LANES };
+        const size_t n = (size_t)(GROUPS + TAIL) * L;
         vkrt_ray *rays = calloc(n, sizeof *rays);
         vkrt_hit *hb = calloc(n, sizeof *hb), *hw = calloc(n, sizeof *hw);
         if (!rays || !hb || !hw) abort();
@@ -1501,11 +1502,11 @@ static void packets_answer_as_single_rays_on_axis_and_edge_directions(void)
                 o[(a + 1) % 3] += -0.8f * base[(a + 1) % 3];
             }
             const float *span = spans[g % ns];
-            for (int l = 0; l < 4; l++) {
-                vkrt_ray *r = &rays[g * 4 + (size_t)l];
+            for (int l = 0; l < L; l++) {
+                vkrt_ray *r = &rays[g * L + (size_t)l];
                 memcpy(r->origin, o, sizeof o);
                 for (int k = 0; k < 3; k++) r->dir[k] = base[k];
-                /* Lane offsets small enough for one packet (PACKET4_MIN_COSINE). */
+                /* Lane offsets small enough for one packet (PACKET8_MIN_COSINE). */
                 const int b = (a + 2) % 3, c2 = diagonal ? a : (a + 1) % 3;
                 r->dir[b] += tiny[(size_t)(rng_uniform(&rng) * (double)nt) % nt];
                 if (!diagonal) r->dir[c2] += tiny[(size_t)(rng_uniform(&rng) * (double)nt) % nt];
@@ -1516,7 +1517,7 @@ static void packets_answer_as_single_rays_on_axis_and_edge_directions(void)
             }
             if (g >= GROUPS) {
                 /* The tail: one ray of the group must miss, so the group leaves the packet path. */
-                vkrt_ray *r = &rays[g * 4 + (size_t)(g % 4)];
+                vkrt_ray *r = &rays[g * L + (size_t)(g % L)];
                 switch (g % 3) {
                 case 0: r->dir[0] = NAN; break;
                 case 1: r->dir[0] = r->dir[1] = r->dir[2] = 0.0f; break;
@@ -1533,7 +1534,7 @@ static void packets_answer_as_single_rays_on_axis_and_edge_directions(void)
                 size_t hits = 0, tie_hits = 0, differ = 0;
                 for (size_t i = 0; i < n; i++) {
                     hits += hb[i].prim_id != VKRT_NO_HIT;
-                    tie_hits += i / 4 % 7 == 0 && hb[i].prim_id != VKRT_NO_HIT;
+                    tie_hits += i / L % 7 == 0 && hb[i].prim_id != VKRT_NO_HIT;
                     const bool same = any ? (hb[i].prim_id == VKRT_NO_HIT) == (hw[i].prim_id == VKRT_NO_HIT)
                                           : memcmp(&hb[i], &hw[i], sizeof hb[i]) == 0;
                     if (!same && differ++ < 3)
