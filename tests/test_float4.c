@@ -179,6 +179,8 @@ static void eight_lane_masks_selects_and_lane_operations_are_their_expressions(v
                       x[4], x[5], x[6], x[7]);
             f8_store(r, f8_set(x[7], x[6], x[5], x[4], x[3], x[2], x[1], x[0]));
             for (int l = 0; l < 8; l++) CHECK(same(r[l], x[7 - l]));
+            f8_store(r, f8_join(f4_set(x[4], x[5], x[6], x[7]), f4_set(x[0], x[1], x[2], x[3])));
+            for (int l = 0; l < 8; l++) CHECK(same(r[l], x[(l + 4) % 8]));
             f8_store(r, f8_set1(values[i]));
             for (int l = 0; l < 8; l++) CHECK(same(r[l], values[i]));
         }
