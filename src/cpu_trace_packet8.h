@@ -12,7 +12,7 @@
  *
  * Eight lanes, not four: a node's four box tests cost the same instructions for eight rays as
  * for four where float8 is one AVX register (the x86-64-v3 build), and the fetch, sort and
- * stack work is shared by twice the rays; 0.86x the time of four-ray packets on the standard
+ * stack work is shared by twice the rays: 0.83-0.87x the time of four-ray packets on the standard
  * view's primary rays (docs/issue7.md, the thirty-third session). The baseline build's float8
  * is two SSE2 halves, the same bits.
  *
