@@ -1463,12 +1463,12 @@ static void bvh4_and_binary_traversal_give_identical_hits(void)
 
 /* CPU_TRACE_PACKET_LANES coherent rays from the buffer go through the 4-wide BVH as a packet
  * (packet8_load: the rays' reciprocals, watertight axes and shears divided eight lanes at a
- * time, float8 one AVX register in the x86-64-v3 build, two halves in the baseline); the binary BVH
- * traces them one by one (ray_from_buffer_f). Both must answer bit for bit alike where the
- * setup has its cases: directions along each axis with either sign (kz and the swap of kx and
- * ky), components of +-0 and denormals (parallel lanes, infinite reciprocals), ties between
- * the largest components, every kind of tmin and tmax, and groups with a ray that must miss
- * (which leave the packet path). */
+ * time, float8 one AVX register in the x86-64-v3 build, two halves in the baseline); the
+ * binary BVH traces them one by one (ray_from_buffer_f). Both must answer bit for bit alike
+ * where the setup has its cases: directions along each axis with either sign (kz and the swap
+ * of kx and ky), components of +-0 and denormals (parallel lanes, infinite reciprocals), ties
+ * between the largest components, every kind of tmin and tmax, and groups with a ray that must
+ * miss (which leave the packet path). */
 static void packets_answer_as_single_rays_on_axis_and_edge_directions(void)
 {
     const float tiny[] = { 0.0f, -0.0f, 1e-3f, -1e-3f, 2e-2f, -2e-2f, 1e-40f, -1e-40f };
