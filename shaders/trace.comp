@@ -13,6 +13,11 @@
 #endif
 
 #include "vkrt_shared.h"
+#if VKRT_NAIVE_SHARE > 1
+#extension GL_KHR_shader_subgroup_basic : require
+#extension GL_KHR_shader_subgroup_vote : require
+#extension GL_KHR_shader_subgroup_ballot : require
+#endif
 
 layout(local_size_x = VKRT_TRACE_GROUP_X, local_size_y = VKRT_TRACE_GROUP_Y, local_size_z = 1) in;
 
@@ -427,15 +432,52 @@ void store_carried(uint slot, hit best)
     hits[slot] = vkrt_gpu_hit(best.prim != NO_PRIM ? best.t : T_INFINITY, best.tri, best.u, best.v);
 }
 
+#if VKRT_NAIVE_SHARE > 1
+/* Lane k's triangle, read by every lane of the subgroup. */
+#define BROADCAST_TRI(t, k)                                                                                 \
+    vkrt_gpu_tri(subgroupBroadcast(t.v0, k), subgroupBroadcast(t.prim_id, k), subgroupBroadcast(t.v1, k), \
+                 subgroupBroadcast(t.n0, k), subgroupBroadcast(t.v2, k), subgroupBroadcast(t.n1, k),       \
+                 subgroupBroadcast(t.face_n, k), subgroupBroadcast(t.n2, k))
+/* The step's k-th triangle (subgroupBroadcast takes a constant lane), for the lanes still
+ * tracing; an occlusion query's lane stops at its first hit. */
+#define TEST_SHARED_TRIANGLE(k)                                                          \
+    if (k < VKRT_NAIVE_SHARE) {                                                          \
+        uint index_k = subgroupBroadcast(mine, k);                                       \
+        vkrt_gpu_tri tri_k = BROADCAST_TRI(tri, k);                                      \
+        if (tracing) {                                                                   \
+            test_triangle_data(r, index_k, tri_k, best);                                 \
+            if (ANYHIT != 0u) tracing = best.prim == NO_PRIM;                            \
+        }                                                                                \
+    }
+#endif
+
 /* Naive traversal of one ray over this dispatch's chunk; an occlusion query stops at its first
- * hit (or passes a chunk by when an earlier one found it). */
-void trace_naive_chunk(ray r, inout hit best)
+ * hit (or passes a chunk by when an earlier one found it). Every invocation of the subgroup
+ * calls it, `tracing` false where it has no ray (past the tile's edge or the buffer's end, or
+ * an invalid ray): with VKRT_NAIVE_SHARE > 1 each step reads VKRT_NAIVE_SHARE triangles, one
+ * a lane, and every lane tests all of them through subgroupBroadcast. lavapipe reads memory a
+ * lane at a time inside a loop, whatever the address, so a triangle read by every lane cost
+ * eight reads: shared, naive images took 0.29-0.31x the time (docs/issue7.md, the thirty-fourth session).
+ * The last step's lanes past the chunk's end read its last triangle again; a second test of a
+ * triangle never changes the closest hit (hit_closer), so the images stay the BVH's. */
+void trace_naive_chunk(ray r, bool tracing, inout hit best)
 {
-    if (ANYHIT != 0u && best.prim != NO_PRIM) return;
+    if (ANYHIT != 0u && best.prim != NO_PRIM) tracing = false;
+#if VKRT_NAIVE_SHARE > 1
+    for (uint base = p.tri_first; base < p.tri_end; base += VKRT_NAIVE_SHARE) {
+        if (ANYHIT != 0u && !subgroupAny(tracing)) break;
+        uint mine = min(base + gl_SubgroupInvocationID % VKRT_NAIVE_SHARE, p.tri_end - 1u);
+        vkrt_gpu_tri tri = load_tri(mine);
+        TEST_SHARED_TRIANGLE(0u) TEST_SHARED_TRIANGLE(1u) TEST_SHARED_TRIANGLE(2u) TEST_SHARED_TRIANGLE(3u)
+        TEST_SHARED_TRIANGLE(4u) TEST_SHARED_TRIANGLE(5u) TEST_SHARED_TRIANGLE(6u) TEST_SHARED_TRIANGLE(7u)
+    }
+#else
+    if (!tracing) return;
     for (uint i = p.tri_first; i < p.tri_end; i++) {
         test_triangle(r, i, best);
         if (ANYHIT != 0u && best.prim != NO_PRIM) break;
     }
+#endif
 }
 
 /* vkrt_trace_rays: one ray of the buffer, its closest hit written as a vkrt_hit. The wavefront
@@ -444,14 +486,20 @@ void trace_naive_chunk(ray r, inout hit best)
 void trace_buffer_ray()
 {
     uint index = gl_WorkGroupID.x * VKRT_TRACE_GROUP_SIZE + gl_LocalInvocationIndex;
-    if (index >= p.tile_width) return;
+    /* Naive traversal keeps the invocations past the buffer's end to the end of the chunk's
+     * loop, which the whole subgroup runs together (trace_naive_chunk). */
+    bool inside = index < p.tile_width;
+    if (!inside && TRAVERSAL != VKRT_GPU_TRAVERSAL_NAIVE) return;
     ray r;
-    bool valid = ray_from_buffer(rays[index], r);
+    bool valid = false;
+    if (inside) valid = ray_from_buffer(rays[index], r);
+    else r = ray_setup(vec3(0.0), vec3(0.0, 0.0, 1.0), 0.0, 0.0);
     hit best = hit(r.tmax, 0.0, 0.0, NO_PRIM, NO_PRIM);
     heat_counts heat = heat_counts(0u, 0u, 0u);
     if (TRAVERSAL == VKRT_GPU_TRAVERSAL_NAIVE) {
-        restore_carried(index, best);
-        if (valid) trace_naive_chunk(r, best);
+        if (inside) restore_carried(index, best);
+        trace_naive_chunk(r, valid, best);
+        if (!inside) return;
         if (p.last_chunk == 0u) {
             store_carried(index, best);
             return;
@@ -565,7 +613,10 @@ void main()
         return;
     }
     uvec2 local = gl_GlobalInvocationID.xy;
-    if (local.x >= p.tile_width || local.y >= p.tile_height) return;
+    /* Naive traversal keeps the invocations past the tile's edge to the end of the chunk's
+     * loop, which the whole subgroup runs together (trace_naive_chunk). */
+    bool inside = local.x < p.tile_width && local.y < p.tile_height;
+    if (!inside && TRAVERSAL != VKRT_GPU_TRAVERSAL_NAIVE) return;
     uint x = p.tile_x + local.x, y = p.tile_y + local.y;
     hit best = hit(T_INFINITY, 0.0, 0.0, NO_PRIM, NO_PRIM);
     heat_counts heat = heat_counts(0u, 0u, 0u);
@@ -575,13 +626,14 @@ void main()
         /* Naive heat is tri_total whatever the ray does, so the heatmap skips the tests (and
          * every chunk but the last does nothing). */
         if (MODE == VKRT_GPU_MODE_HEATMAP) {
-            if (p.last_chunk != 0u) imageStore(out_image, ivec2(local), shade(best, heat));
+            if (inside && p.last_chunk != 0u) imageStore(out_image, ivec2(local), shade(best, heat));
             return;
         }
         uint slot = local.y * p.tile_width + local.x;
-        restore_carried(slot, best);
+        if (inside) restore_carried(slot, best);
         ray r = camera_ray(p, x, y);
-        for (uint i = p.tri_first; i < p.tri_end; i++) test_triangle(r, i, best);
+        trace_naive_chunk(r, inside, best);
+        if (!inside) return;
         if (p.last_chunk != 0u) {
             finish_pixel_hit(x, y, best);
             imageStore(out_image, ivec2(local), shade(best, heat));

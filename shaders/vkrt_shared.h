@@ -167,6 +167,11 @@ typedef struct vkrt_float3 { float x, y, z; } vkrt_float3;
  * loop after 65,535 iterations per group of 8 invocations, so larger scenes are split into
  * chunks whose closest hits are merged through the hit buffer. */
 #define VKRT_NAIVE_CHUNK_TRIS 8192u
+/* Naive traversal reads a chunk's triangles this many at a time at most, one a lane of a
+ * subgroup, and every lane tests them all (trace_naive_chunk in shaders/trace.comp, which
+ * unrolls that many tests); the device's share is vk_naive_share's, VKRT_NAIVE_SHARE in the
+ * shaders. */
+#define VKRT_NAIVE_SHARE_MAX 8u
 
 /* Loop budget of lavapipe (Mesa's llvmpipe): it silently ends every loop of a shader once
  * 65,535 iterations in all have run per SIMD group of 8 invocations (one counter shared by

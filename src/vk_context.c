@@ -267,6 +267,19 @@ static vkrt_result pick_device(vk_context *vk, const vkrt_context_desc *desc)
     return VKRT_OK;
 }
 
+uint32_t vk_naive_share(const VkPhysicalDeviceSubgroupProperties *subgroup)
+{
+    const VkSubgroupFeatureFlags needed =
+        VK_SUBGROUP_FEATURE_BASIC_BIT | VK_SUBGROUP_FEATURE_VOTE_BIT | VK_SUBGROUP_FEATURE_BALLOT_BIT;
+    const uint32_t size = subgroup->subgroupSize;
+    if (!(subgroup->supportedStages & VK_SHADER_STAGE_COMPUTE_BIT) || (subgroup->supportedOperations & needed) != needed ||
+        size == 0 || size > VKRT_TRACE_GROUP_SIZE || VKRT_TRACE_GROUP_SIZE % size != 0)
+        return 1;
+    uint32_t share = 1;
+    while (share * 2 <= size && share * 2 <= VKRT_NAIVE_SHARE_MAX) share *= 2;
+    return share;
+}
+
 static vkrt_result create_device(vk_context *vk)
 {
     vkGetPhysicalDeviceProperties(vk->physical, &vk->properties);
@@ -286,9 +299,12 @@ static vkrt_result create_device(vk_context *vk)
         .sType = VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_MAINTENANCE_3_PROPERTIES };
     VkPhysicalDeviceDriverProperties driver = { .sType = VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_DRIVER_PROPERTIES,
                                                 .pNext = &maintenance3 };
-    VkPhysicalDeviceProperties2 props2 = { .sType = VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_PROPERTIES_2, .pNext = &driver };
+    VkPhysicalDeviceSubgroupProperties subgroup = { .sType = VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_SUBGROUP_PROPERTIES,
+                                                    .pNext = &driver };
+    VkPhysicalDeviceProperties2 props2 = { .sType = VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_PROPERTIES_2, .pNext = &subgroup };
     vkGetPhysicalDeviceProperties2(vk->physical, &props2);
     vk->max_allocation = maintenance3.maxMemoryAllocationSize;
+    vk->naive_share = vk_naive_share(&subgroup);
     bool llvmpipe = driver.driverID == VK_DRIVER_ID_MESA_LLVMPIPE ||
                     vk->properties.deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU;
     vk->trace_budget = llvmpipe ? VKRT_LAVAPIPE_BUDGET : 0;

@@ -43,6 +43,9 @@ typedef struct vk_context {
     bool buffer_address;              /* bufferDeviceAddress enabled: a scene beyond one storage buffer
                                          is split into pieces the shaders reach by address */
     VkDeviceSize max_allocation;      /* maxMemoryAllocationSize: one device memory allocation at most */
+    uint32_t naive_share;             /* lanes of a subgroup whose triangle reads naive traversal
+                                         shares (VKRT_NAIVE_SHARE, vk_naive_share); 1: none. Tests
+                                         may set it before the first pipeline is made */
     uint32_t trace_budget;            /* BVH loop iterations per dispatch (VKRT_SPEC_BUDGET); 0: unlimited */
     VkCommandPool command_pool;
     VkPipelineCache pipeline_cache;
@@ -91,6 +94,12 @@ typedef struct vk_context {
 /* Creates everything for the device the desc chooses. Failures: VKRT_ERROR_NO_DEVICE (no
  * loader, no driver, no usable device, index out of range), VKRT_ERROR_VULKAN (a call
  * failed, or validation asked for and not installed), VKRT_ERROR_OUT_OF_MEMORY. */
+/* How many lanes of a subgroup share their triangle reads in naive traversal: the largest power
+ * of two up to VKRT_NAIVE_SHARE_MAX and the subgroup size, where compute shaders have the basic,
+ * vote and ballot operations and the subgroups fill a trace workgroup exactly (so that lanes 0
+ * to the share - 1 of every subgroup are there to broadcast); else 1. */
+uint32_t vk_naive_share(const VkPhysicalDeviceSubgroupProperties *subgroup);
+
 vkrt_result vk_context_create(core *c, const vkrt_context_desc *desc, vk_context **out);
 /* Waits for the device, saves the pipeline cache, destroys everything; NULL is a no-op. */
 void vk_context_destroy(vk_context *vk);

@@ -2,6 +2,7 @@
 
 #include <glslang/Include/glslang_c_interface.h>
 #include <glslang/Public/resource_limits_c.h>
+#include <stdio.h>
 #include <string.h>
 
 #include "../shaders/vkrt_shared.h"
@@ -129,13 +130,18 @@ static vkrt_result create_layouts(vk_context *vk, vk_pipelines *p)
  * PhysicalStorageBufferAddresses capabilities may only appear in a module for a device that
  * enabled them, and a specialization constant cannot remove a capability. And with
  * "#define VKRT_EXACT_ROUNDING" where the device's own division and square root may round
- * otherwise than C's (shaders/rounding.glsl). NULL when out of memory. */
+ * otherwise than C's (shaders/rounding.glsl). VKRT_NAIVE_SHARE is always defined (a GLSL #if
+ * may not name an undefined macro); above 1 the module uses subgroup operations, which the
+ * device then has (vk_naive_share). NULL when out of memory. */
 char *vk_shader_source(vk_context *vk, const char *source)
 {
+    char share[48];
+    snprintf(share, sizeof share, "#define VKRT_NAIVE_SHARE %u\n", (unsigned)vk->naive_share);
     const char *const defines[] = {
         vk->float64 ? "#define VKRT_HAS_FLOAT64 1\n" : "",
         vk->buffer_address ? "#define VKRT_HAS_BUFFER_ADDRESS 1\n" : "",
         vk->exact_rounding ? "#define VKRT_EXACT_ROUNDING 1\n" : "",
+        share,
     };
     const char *version = strstr(source, "#version");
     const char *after = version ? strchr(version, '\n') : NULL;

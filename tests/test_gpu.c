@@ -1622,6 +1622,143 @@ static void gpu_large_mapped_buffers_are_advised_huge_pages(void)
  * of that context carry the define that selects it; those of the default context carry it
  * exactly where it emulates, which lavapipe's (a CPU device) must not. On a real GPU (an
  * NVIDIA H100 ran this) both contexts emulate and the comparisons simply run twice. */
+/* Naive traversal reads VKRT_NAIVE_SHARE triangles a step, one a lane, and every lane of the
+ * subgroup tests them all (trace_naive_chunk). The rule that sets the share (vk_naive_share);
+ * on lavapipe, whose subgroups are its SIMD groups, the reads are shared and its shaders say so;
+ * and a context that reads every triangle in every lane (a share of 1, the path of devices
+ * without subgroup votes and ballots) gives the same images at a size whose rows end inside a
+ * subgroup, and the same hits for a ray count that ends inside one (a ray at each triangle and
+ * three invalid ones), closest and any-hit, as the BVH does. */
+static void gpu_naive_traversal_shares_triangle_reads_across_a_subgroup(void)
+{
+    const VkSubgroupFeatureFlags basic = VK_SUBGROUP_FEATURE_BASIC_BIT, vote = VK_SUBGROUP_FEATURE_VOTE_BIT,
+                                 ballot = VK_SUBGROUP_FEATURE_BALLOT_BIT, all = basic | vote | ballot;
+    const struct {
+        uint32_t size;
+        VkShaderStageFlags stages;
+        VkSubgroupFeatureFlags operations;
+        uint32_t share;
+    } rules[] = {
+        { 8, VK_SHADER_STAGE_COMPUTE_BIT, all, 8 },
+        { 4, VK_SHADER_STAGE_COMPUTE_BIT, all | VK_SUBGROUP_FEATURE_SHUFFLE_BIT, 4 },
+        { 32, VK_SHADER_STAGE_ALL, all, VKRT_NAIVE_SHARE_MAX },
+        { 64, VK_SHADER_STAGE_COMPUTE_BIT, all, VKRT_NAIVE_SHARE_MAX },
+        { 1, VK_SHADER_STAGE_COMPUTE_BIT, all, 1 },
+        { 2 * VKRT_TRACE_GROUP_SIZE, VK_SHADER_STAGE_COMPUTE_BIT, all, 1 },
+        { 8, VK_SHADER_STAGE_FRAGMENT_BIT, all, 1 },
+        { 8, VK_SHADER_STAGE_COMPUTE_BIT, basic | ballot, 1 },
+        { 8, VK_SHADER_STAGE_COMPUTE_BIT, basic | vote, 1 },
+    };
+    for (size_t i = 0; i < sizeof rules / sizeof rules[0]; i++) {
+        VkPhysicalDeviceSubgroupProperties props = { .sType = VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_SUBGROUP_PROPERTIES,
+                                                     .subgroupSize = rules[i].size,
+                                                     .supportedStages = rules[i].stages,
+                                                     .supportedOperations = rules[i].operations };
+        uint32_t share = vk_naive_share(&props);
+        CHECK_MSG(share == rules[i].share, "rule %zu: subgroups of %u share %u, wanted %u", i, rules[i].size, share,
+                  rules[i].share);
+    }
+    if (gpu->vk->trace_budget != 0)
+        CHECK_MSG(gpu->vk->naive_share >= 4, "lavapipe's naive traversal shares %u lanes' reads", gpu->vk->naive_share);
+    char *source = vk_shader_source(gpu->vk, vkrt_shader_trace_comp), define[48];
+    snprintf(define, sizeof define, "#define VKRT_NAIVE_SHARE %u\n", gpu->vk->naive_share);
+    CHECK_MSG(source && strstr(source, define), "the shaders do not say the device's share (%u)", gpu->vk->naive_share);
+    core_free(gpu->vk->core, source);
+
+    vkrt_context *alone = NULL;
+    vkrt_context_desc desc = { .backend = VKRT_BACKEND_GPU, .log = check_gpu_log, .validation = true,
+                               .pipeline_cache_path = getenv("VKRT_PIPELINE_CACHE") };
+    CHECK(vkrt_context_create(&desc, &alone) == VKRT_OK);
+    if (!alone) return;
+    alone->vk->naive_share = 1;
+    const char *path = VKRT_MODELS_DIR "/meshes/bunny.obj";
+    vkrt_scene *shared_scene = make_scene(gpu, path, VKRT_BVH_BUILDER_DEFAULT);
+    vkrt_scene *alone_scene = make_scene(alone, path, VKRT_BVH_BUILDER_DEFAULT);
+    const uint32_t w = 21, h = 13;
+    for (int k = 0; shared_scene && alone_scene && k < 2; k++) {
+        vkrt_render_desc d = { .width = w, .height = h, .mode = k ? VKRT_MODE_ID : VKRT_MODE_DEPTH,
+                               .traversal = VKRT_TRAVERSAL_BVH };
+        float *through_bvh = render(gpu, shared_scene, &d);
+        d.traversal = VKRT_TRAVERSAL_NAIVE;
+        float *shared_image = render(gpu, shared_scene, &d), *alone_image = render(alone, alone_scene, &d);
+        if (through_bvh && shared_image && alone_image) {
+            size_t bytes = (size_t)w * h * 4 * sizeof(float), hits = 0;
+            for (size_t i = 0; i < (size_t)w * h; i++) hits += through_bvh[i * 4] >= 0;
+            CHECK_MSG(memcmp(through_bvh, shared_image, bytes) == 0, "mode %d: shared naive reads differ from the BVH's image", k);
+            CHECK_MSG(memcmp(through_bvh, alone_image, bytes) == 0, "mode %d: unshared naive reads differ from the BVH's image", k);
+            CHECK_MSG(hits > (size_t)w * h / 10, "mode %d: only %zu pixels hit", k, hits);
+        }
+        free(through_bvh);
+        free(shared_image);
+        free(alone_image);
+    }
+    /* A ray towards each triangle's centroid from a hundredth along its normal, which hits it
+     * unless another triangle lies in between, so that a triangle left untested changes an
+     * answer; then three invalid rays. 3,677 rays: the last subgroup ends part-way. */
+    vkrt_scene_stats stats = { 0 };
+    if (shared_scene) vkrt_scene_stats_get(shared_scene, &stats);
+    const size_t tris = stats.triangles, n = tris + 3;
+    float *corners = malloc(tris * 9 * sizeof *corners);
+    vkrt_ray *rays = calloc(n, sizeof *rays);
+    const bool ready = corners && rays && tris && vkrt_scene_triangles_get(shared_scene, corners, tris * 9) == VKRT_OK;
+    CHECK_MSG(ready, "the bunny's %zu triangles", tris);
+    for (size_t t = 0; ready && t < tris; t++) {
+        const float *v = corners + 9 * t;
+        double e1[3], e2[3], normal[3], length = 0.0;
+        for (int a = 0; a < 3; a++) e1[a] = (double)v[3 + a] - v[a], e2[a] = (double)v[6 + a] - v[a];
+        for (int a = 0; a < 3; a++) {
+            normal[a] = e1[(a + 1) % 3] * e2[(a + 2) % 3] - e1[(a + 2) % 3] * e2[(a + 1) % 3];
+            length += normal[a] * normal[a];
+        }
+        length = sqrt(length) > 0.0 ? sqrt(length) : 1.0;
+        for (int a = 0; a < 3; a++) {
+            double centroid = ((double)v[a] + v[3 + a] + v[6 + a]) / 3.0;
+            rays[t].origin[a] = (float)(centroid + 0.01 * normal[a] / length);
+            rays[t].dir[a] = (float)(-normal[a] / length);
+        }
+    }
+    if (ready) {
+        rays[tris] = (vkrt_ray){ .origin = { 0.0f, NAN, 2.0f }, .dir = { 0.0f, 0.0f, -1.0f } };
+        rays[tris + 1] = (vkrt_ray){ .origin = { 0.0f, 0.0f, 2.0f } }; /* a zero direction */
+        rays[tris + 2] = (vkrt_ray){ .origin = { 0.0f, 0.0f, 2.0f }, .dir = { 0.0f, 0.0f, -INFINITY } };
+    }
+    for (int any = 0; ready && alone_scene && any < 2; any++) {
+        vkrt_trace_desc d = { .any_hit = any, .traversal = VKRT_TRAVERSAL_BVH };
+        vkrt_hit *through_bvh = trace_all(gpu, shared_scene, &d, rays, n);
+        d.traversal = VKRT_TRAVERSAL_NAIVE;
+        vkrt_hit *shared_hits = trace_all(gpu, shared_scene, &d, rays, n), *alone_hits = trace_all(alone, alone_scene, &d, rays, n);
+        if (through_bvh && shared_hits && alone_hits) {
+            size_t hits = 0, differ = 0;
+            for (size_t i = 0; i < n; i++) {
+                bool hit = through_bvh[i].prim_id != VKRT_NO_HIT;
+                hits += hit;
+                if (any) {
+                    differ += hit != (shared_hits[i].prim_id != VKRT_NO_HIT);
+                    differ += hit != (alone_hits[i].prim_id != VKRT_NO_HIT);
+                } else {
+                    differ += memcmp(&through_bvh[i], &shared_hits[i], sizeof through_bvh[i]) != 0;
+                    differ += memcmp(&through_bvh[i], &alone_hits[i], sizeof through_bvh[i]) != 0;
+                }
+            }
+            CHECK_MSG(differ == 0, "any-hit %d: %zu naive answers differ from the BVH's", any, differ);
+            fprintf(stderr, "  any-hit %d: %zu of %zu rays hit; %zu naive answers, shared or not, differ from the BVH's\n", any,
+                    hits, n, differ);
+            CHECK_MSG(hits > tris * 9 / 10 && through_bvh[tris].prim_id == VKRT_NO_HIT &&
+                          through_bvh[tris + 1].prim_id == VKRT_NO_HIT && through_bvh[tris + 2].prim_id == VKRT_NO_HIT,
+                      "any-hit %d: %zu of %zu rays hit, or an invalid ray hit", any, hits, n);
+        }
+        free(through_bvh);
+        free(shared_hits);
+        free(alone_hits);
+    }
+    free(rays);
+    free(corners);
+    vkrt_scene_destroy(shared_scene);
+    vkrt_scene_destroy(alone_scene);
+    CHECK_EQ_U64(vkrt_context_validation_messages(alone), 0);
+    vkrt_context_destroy(alone);
+}
+
 static void gpu_emulated_rounding_gives_the_same_images(void)
 {
     vkrt_context *native = gpu, *emulated = NULL;
@@ -1665,6 +1802,7 @@ int main(void)
     RUN(gpu_tiles_are_seamless);
     RUN(gpu_normal_and_heatmap_match_cpu);
     RUN(gpu_bvh_and_naive_give_identical_images);
+    RUN(gpu_naive_traversal_shares_triangle_reads_across_a_subgroup);
     RUN(gpu_builtin_scene_renders);
     RUN(gpu_render_rejects_bad_arguments);
     RUN(gpu_refuses_double_precision);
