@@ -91,15 +91,15 @@ typedef struct vk_context {
     bool no_wide_traversal;           /* scenes uploaded from now on keep to the binary BVH */
 } vk_context;
 
-/* Creates everything for the device the desc chooses. Failures: VKRT_ERROR_NO_DEVICE (no
- * loader, no driver, no usable device, index out of range), VKRT_ERROR_VULKAN (a call
- * failed, or validation asked for and not installed), VKRT_ERROR_OUT_OF_MEMORY. */
 /* How many lanes of a subgroup share their triangle reads in naive traversal: the largest power
  * of two up to VKRT_NAIVE_SHARE_MAX and the subgroup size, where compute shaders have the basic,
  * vote and ballot operations and the subgroups fill a trace workgroup exactly (so that lanes 0
  * to the share - 1 of every subgroup are there to broadcast); else 1. */
 uint32_t vk_naive_share(const VkPhysicalDeviceSubgroupProperties *subgroup);
 
+/* Creates everything for the device the desc chooses. Failures: VKRT_ERROR_NO_DEVICE (no
+ * loader, no driver, no usable device, index out of range), VKRT_ERROR_VULKAN (a call
+ * failed, or validation asked for and not installed), VKRT_ERROR_OUT_OF_MEMORY. */
 vkrt_result vk_context_create(core *c, const vkrt_context_desc *desc, vk_context **out);
 /* Waits for the device, saves the pipeline cache, destroys everything; NULL is a no-op. */
 void vk_context_destroy(vk_context *vk);
