@@ -1616,12 +1616,6 @@ static void gpu_large_mapped_buffers_are_advised_huge_pages(void)
     vk_buffer_destroy(vk, &b);
 }
 
-/* The bit-exact comparisons of the tests above again, in a context whose shaders divide and
- * take square roots through the emulation that real GPUs run (rounding.glsl): on lavapipe,
- * whose own operators round correctly, it must change no bit of any image or hit. The shaders
- * of that context carry the define that selects it; those of the default context carry it
- * exactly where it emulates, which lavapipe's (a CPU device) must not. On a real GPU (an
- * NVIDIA H100 ran this) both contexts emulate and the comparisons simply run twice. */
 /* Naive traversal reads VKRT_NAIVE_SHARE triangles a step, one a lane, and every lane of the
  * subgroup tests them all (trace_naive_chunk). The rule that sets the share (vk_naive_share);
  * on lavapipe, whose subgroups are its SIMD groups, the reads are shared and its shaders say so;
@@ -1759,6 +1753,12 @@ static void gpu_naive_traversal_shares_triangle_reads_across_a_subgroup(void)
     vkrt_context_destroy(alone);
 }
 
+/* The bit-exact comparisons of the tests above again, in a context whose shaders divide and
+ * take square roots through the emulation that real GPUs run (rounding.glsl): on lavapipe,
+ * whose own operators round correctly, it must change no bit of any image or hit. The shaders
+ * of that context carry the define that selects it; those of the default context carry it
+ * exactly where it emulates, which lavapipe's (a CPU device) must not. On a real GPU (an
+ * NVIDIA H100 ran this) both contexts emulate and the comparisons simply run twice. */
 static void gpu_emulated_rounding_gives_the_same_images(void)
 {
     vkrt_context *native = gpu, *emulated = NULL;
