@@ -158,27 +158,12 @@ vkrt_result bvh_build_finish(bvh_build_state *b, bvh *out)
     for (uint32_t k = 0; k < b->tri_count && !b->order_filled; k++)
         memcpy(&b->order[k], tri + k * b->ref_size, sizeof b->order[k]);
     core_free(c, b->refs);
-    /* The array was sized for the worst case (one triangle per leaf); give back the rest. A
-     * failed shrink only wastes memory, so it is not an error. */
+    /* The arrays were sized for the worst case (one triangle per leaf; a spatial-split build's
+     * order for its reference budget): give back the rest. */
     vkrt_gpu_node *nodes = b->nodes;
-    if (b->node_count < b->node_cap) {
-        vkrt_gpu_node *exact = core_alloc_array(c, b->node_count, sizeof *exact);
-        if (exact) {
-            memcpy(exact, nodes, (size_t)b->node_count * sizeof *exact);
-            core_free(c, nodes);
-            nodes = exact;
-        }
-    }
-    /* A spatial-split build sized the order for its reference budget. */
+    if (b->node_count < b->node_cap) nodes = core_shrink(c, nodes, (size_t)b->node_count * sizeof *nodes);
     uint32_t *order = b->order;
-    if (b->tri_count < b->ref_cap) {
-        uint32_t *exact = core_alloc_array(c, b->tri_count, sizeof *exact);
-        if (exact) {
-            memcpy(exact, order, (size_t)b->tri_count * sizeof *exact);
-            core_free(c, order);
-            order = exact;
-        }
-    }
+    if (b->tri_count < b->ref_cap) order = core_shrink(c, order, (size_t)b->tri_count * sizeof *order);
     out->nodes = nodes;
     out->node_count = b->node_count;
     out->tri_order = order;

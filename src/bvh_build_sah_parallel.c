@@ -26,8 +26,7 @@
  * as it stands (0) after each pass over a level's pieces, so that the callback can cancel
  * there too. Every allocation is made on the calling thread between the workers'
  * jobs, and each can fail cleanly: the build then frees everything and returns
- * VKRT_ERROR_OUT_OF_MEMORY (the compacted node array excepted: without it the nodes are
- * moved down in place). */
+ * VKRT_ERROR_OUT_OF_MEMORY. */
 #include <stdatomic.h>
 #include <stdlib.h>
 #include <string.h>
@@ -107,7 +106,6 @@ typedef struct sah_job {
     size_t subtree_count, subtree_cap;
     top_split *splits;
     size_t split_count, split_cap;
-    vkrt_gpu_node *exact;          /* the compacted node array while it is filled */
     _Atomic uint64_t placed;       /* triangles in the leaves of finished subtrees */
 } sah_job;
 
@@ -401,27 +399,21 @@ static void shift_children(vkrt_gpu_node *n, uint32_t shift)
     if (n->tri_count == 0) n->left_first -= shift;
 }
 
-/* Moves one subtree's nodes into the exact array, renumbering their children on the way, and
- * reads its part of the triangle order (bvh_build_finish() would on one thread). */
-static void copy_subtree(void *job, uint32_t i)
+/* Reads one subtree's part of the triangle order (bvh_build_finish() would on one thread). */
+static void fill_subtree_order(void *job, uint32_t i)
 {
     sah_job *j = job;
     const subtree *t = &j->subtrees[i];
-    const vkrt_gpu_node *from = j->b->nodes + t->region;
-    vkrt_gpu_node *to = j->exact + t->region - t->shift;
-    for (uint32_t k = 0; k < t->used; k++) {
-        to[k] = from[k];
-        shift_children(&to[k], t->shift);
-    }
     for (uint32_t k = t->task.first; k < t->task.first + t->task.count; k++)
         memcpy(&j->b->order[k], &j->refs[k].bmax[3], sizeof j->b->order[k]);
 }
 
 /* Squeezes the unused slots out of the node array: every node moves down by the unused slots
- * before it, and every interior node's children with it. Into an array of the exact size, one
- * subtree per worker (the copy touches a whole array of fresh memory), or, where that cannot
- * be allocated, down within the array on the calling thread, which is safe in ascending order
- * because no node moves up. */
+ * before it, and every interior node's children with it. In place, on the calling thread, in
+ * ascending order of slots, which is safe because no node moves up; bvh_build_finish() then
+ * gives back the array's tail without touching it (core_shrink). Copying the subtrees into a
+ * new array of the exact size, one per worker, built the full dragon in the same time within
+ * the noise, but it allocated 31 MB more and needed this path anyway for when it could not. */
 static void compact(sah_job *j)
 {
     bvh_build_state *b = j->b;
@@ -441,39 +433,27 @@ static void compact(sah_job *j)
         s->pair = s->region - subtree_at(j, s->first)->shift;
         nodes[s->slot].left_first = s->pair;
     }
-    uint32_t count = b->node_cap - holes;
-    j->exact = core_alloc_array(b->c, count, sizeof *j->exact);
-    if (j->exact) {
-        j->exact[0] = nodes[0];
-        for (size_t i = 0; i < j->split_count; i++) {
-            const top_split *s = &j->splits[i];
-            memcpy(&j->exact[s->pair], &nodes[s->region], 2 * sizeof *nodes);
+    work_pool_run(j->pool, (uint32_t)j->subtree_count, fill_subtree_order, NULL, j);
+    b->order_filled = true;
+    /* Ascending source slots: merge the pairs of the splits with the subtrees' ranges (a root
+     * built as one subtree has no splits, nor an array of them). */
+    if (j->split_count > 1) qsort(j->splits, j->split_count, sizeof *j->splits, by_region);
+    size_t si = 0, ti = 0;
+    while (si < j->split_count || ti < j->subtree_count) {
+        bool pair = ti == j->subtree_count || (si < j->split_count && j->splits[si].region < j->subtrees[ti].region);
+        if (pair) {
+            const top_split *s = &j->splits[si++];
+            memmove(&nodes[s->pair], &nodes[s->region], 2 * sizeof *nodes);
+            continue;
         }
-        work_pool_run(j->pool, (uint32_t)j->subtree_count, copy_subtree, NULL, j);
-        b->order_filled = true;
-        core_free(b->c, nodes);
-        b->nodes = j->exact;
-        b->node_cap = count;
-        j->exact = NULL;
-    } else {
-        for (size_t i = 0; i < j->subtree_count; i++) {
-            const subtree *t = &j->subtrees[i];
-            for (uint32_t p = t->region; p < t->region + t->used; p++) shift_children(&nodes[p], t->shift);
-        }
-        /* Ascending source slots: merge the pairs of the splits with the subtrees' ranges. */
-        qsort(j->splits, j->split_count, sizeof *j->splits, by_region);
-        size_t si = 0, ti = 0;
-        while (si < j->split_count || ti < j->subtree_count) {
-            bool pair = ti == j->subtree_count || (si < j->split_count && j->splits[si].region < j->subtrees[ti].region);
-            uint32_t from = pair ? j->splits[si].region : j->subtrees[ti].region;
-            uint32_t n = pair ? 2 : j->subtrees[ti].used;
-            uint32_t to = pair ? j->splits[si].pair : from - j->subtrees[ti].shift;
-            memmove(&nodes[to], &nodes[from], (size_t)n * sizeof *nodes);
-            if (pair) si++;
-            else ti++;
+        const subtree *t = &j->subtrees[ti++];
+        for (uint32_t k = 0; k < t->used; k++) {
+            vkrt_gpu_node *to = &nodes[t->region - t->shift + k];
+            *to = nodes[t->region + k];
+            shift_children(to, t->shift);
         }
     }
-    b->node_count = count;
+    b->node_count = b->node_cap - holes;
 }
 
 /* ---- entry ---------------------------------------------------------------------------------- */

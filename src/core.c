@@ -75,6 +75,20 @@ void core_free(core *c, void *pointer)
     if (pointer) c->allocator.free(c->allocator.user, pointer);
 }
 
+void *core_shrink(core *c, void *pointer, size_t size)
+{
+    if (!pointer) return NULL;
+    if (c->allocator.alloc == default_alloc) {
+        void *shrunk = realloc(pointer, size ? size : 1);
+        return shrunk ? shrunk : pointer;
+    }
+    void *exact = core_alloc(c, size);
+    if (!exact) return pointer;
+    memcpy(exact, pointer, size);
+    core_free(c, pointer);
+    return exact;
+}
+
 int core_grow(core *c, void **array, size_t *capacity, size_t needed, size_t elem_size)
 {
     if (needed <= *capacity) return 0;

@@ -36,6 +36,12 @@ void *core_alloc(core *c, size_t size);
 void *core_alloc_array(core *c, size_t count, size_t size);
 void *core_calloc_array(core *c, size_t count, size_t size);
 void core_free(core *c, void *pointer);
+/* Shrinks a block from core_alloc to its first `size` bytes and returns it, perhaps moved. With
+ * the default allocator this is realloc, which gives the tail back where the block lies and
+ * touches none of it (glibc returns a large block's last pages to the system); a user's
+ * allocator has no realloc, so the block is copied into a new one of the exact size. Where
+ * that cannot be allocated the block is returned whole: a failed shrink only wastes memory. */
+void *core_shrink(core *c, void *pointer, size_t size);
 /* Asks the system to back a block of at least CORE_HUGE_PAGE_MIN bytes with huge pages where it
  * can (Linux: transparent huge pages, a hint the kernel may ignore); smaller blocks are left
  * alone. core_alloc does it for every block it returns, and vk_buffer for the mapped memory of

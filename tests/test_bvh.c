@@ -7,6 +7,7 @@
  * children with not a step to spare. */
 #include <dirent.h>
 #include <float.h>
+#include <malloc.h>
 #include <math.h>
 #include <stdint.h>
 #include <stdio.h>
@@ -1404,10 +1405,58 @@ static void core_alloc_advises_huge_pages_for_large_blocks(void)
     core_free(&c, little);
 }
 
+/* core_shrink keeps a block's first bytes and gives back the rest: in place with the default
+ * allocator (realloc: no copy, and nothing of the tail touched; the builders shrink their
+ * worst-case node arrays with it), by a copy into an exact block with a user's allocator, and
+ * where that copy cannot be allocated the block comes back whole. */
+static void core_shrink_keeps_the_start_and_gives_back_the_rest(void)
+{
+    const size_t large = 4 * CORE_HUGE_PAGE_MIN, kept = CORE_HUGE_PAGE_MIN / 4 + 12;
+    core c;
+    core_init(&c, NULL, NULL, NULL);
+    uint32_t *block = core_alloc(&c, large);
+    CHECK(block != NULL);
+    if (block) {
+        for (size_t i = 0; i < large / sizeof *block; i++) block[i] = (uint32_t)(i * 2654435761u);
+        uint32_t *shrunk = core_shrink(&c, block, kept);
+        CHECK(shrunk != NULL);
+        bool same = true;
+        for (size_t i = 0; shrunk && i < kept / sizeof *shrunk; i++) same &= shrunk[i] == (uint32_t)(i * 2654435761u);
+        CHECK_MSG(same, "the default allocator's shrink changed the kept bytes");
+        /* The C library's own measure of the block: what was given back is no longer its. */
+        size_t usable = shrunk ? malloc_usable_size(shrunk) : 0;
+        CHECK_MSG(usable >= kept && usable <= kept + 4096, "a %zu-byte block shrunk to %zu keeps %zu bytes", large,
+                  kept, usable);
+        core_free(&c, shrunk);
+    }
+
+    counting k = { 0 };
+    core_init(&c, &(vkrt_allocator){ counting_alloc, counting_free, &k }, NULL, NULL);
+    for (int fail = 0; fail < 2; fail++) {
+        uint32_t *b = core_alloc(&c, 4096);
+        CHECK(b != NULL);
+        if (!b) continue;
+        for (uint32_t i = 0; i < 1024; i++) b[i] = i ^ 0x5a5a5a5au;
+        k.calls = 0;
+        k.fail_at = fail ? 1 : 0;
+        uint32_t *s = core_shrink(&c, b, 100 * sizeof *b);
+        k.fail_at = 0;
+        CHECK_MSG(fail ? s == b : s != b, "user allocator, copy %s: the block %s moved", fail ? "refused" : "made",
+                  s == b ? "was not" : "was");
+        CHECK_EQ_U64(k.calls, 1);
+        bool same = true;
+        for (uint32_t i = 0; i < 100; i++) same &= s[i] == (i ^ 0x5a5a5a5au);
+        CHECK_MSG(same, "user allocator, copy %s: the kept bytes changed", fail ? "refused" : "made");
+        core_free(&c, s);
+    }
+    CHECK_EQ_U64(k.allocs, k.frees);
+}
+
 int main(void)
 {
     RUN(bvh_empty_mesh_is_empty_scene);
     RUN(core_alloc_advises_huge_pages_for_large_blocks);
+    RUN(core_shrink_keeps_the_start_and_gives_back_the_rest);
     RUN(bvh_unknown_builder_is_invalid_argument);
     RUN(bvh_single_triangle_is_one_leaf_root);
     RUN(bvh_two_triangles_are_valid);
