@@ -4,6 +4,7 @@
 #endif
 #include "core.h"
 
+#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -51,6 +52,10 @@ void core_advise_huge_pages(void *pointer, size_t size)
 
 void *core_alloc(core *c, size_t size)
 {
+    /* No object may be larger than PTRDIFF_MAX: a larger request is a size that wrapped (a file's
+     * -20 read as 2^64 - 20), which malloc would fail anyway. A user's allocator, or a
+     * sanitizer's, which aborts instead, never sees it. */
+    if (size > PTRDIFF_MAX) return NULL;
     /* A zero-byte request still returns a unique pointer, so NULL always means failure. */
     void *p = c->allocator.alloc(c->allocator.user, size ? size : 1);
     if (p) core_advise_huge_pages(p, size);

@@ -15,6 +15,8 @@
 
 #include <cgltf.h>
 
+#include "file_read.h"
+
 /* Each node instance costs a stack entry and a matrix product; a hierarchy that shares
  * nodes along many levels can still expand exponentially, so the walk has a ceiling. */
 #define GLTF_MAX_NODE_VISITS (1u << 24)
@@ -27,6 +29,26 @@ static void *gltf_alloc(void *user, cgltf_size size)
 static void gltf_free(void *user, void *pointer)
 {
     core_free(user, pointer);
+}
+
+/* cgltf's file reader, for the glTF and the buffer files beside it. cgltf's own allocates a
+ * buffer's whole byteLength before it learns how long the file is (and ftell()'s LLONG_MAX for
+ * a directory): file_read learns that first and refuses what the file cannot hold. */
+static cgltf_result gltf_read_file(const struct cgltf_memory_options *memory, const struct cgltf_file_options *file,
+                                   const char *path, cgltf_size *size, void **data)
+{
+    (void)file;
+    void *bytes = NULL;
+    size_t got = 0;
+    switch (file_read(memory->user_data, path, size ? *size : 0, &bytes, &got)) {
+    case FILE_READ_OK: break;
+    case FILE_READ_CANNOT_OPEN: return cgltf_result_file_not_found;
+    case FILE_READ_OUT_OF_MEMORY: return cgltf_result_out_of_memory;
+    default: return cgltf_result_io_error;
+    }
+    if (size) *size = got;
+    *data = bytes;
+    return cgltf_result_success;
 }
 
 static vkrt_result parse_failure(core *c, const char *path, cgltf_result cr, int saved_errno)
@@ -90,8 +112,8 @@ static vkrt_result buffers_failure(core *c, const char *path, const cgltf_data *
     case cgltf_result_file_not_found:
         return core_fail(c, VKRT_ERROR_IO, "%s: buffer %zu: cannot open '%s'", path, (size_t)i, shown);
     case cgltf_result_io_error:
-        return core_fail(c, VKRT_ERROR_IO, "%s: buffer %zu: cannot read '%s' (shorter than its byteLength?)", path,
-                         (size_t)i, shown);
+        return core_fail(c, VKRT_ERROR_IO, "%s: buffer %zu: cannot read '%s' (not a file, or shorter than its "
+                         "byteLength)", path, (size_t)i, shown);
     case cgltf_result_out_of_memory:
         return core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "%s: out of memory loading buffer %zu", path, (size_t)i);
     case cgltf_result_data_too_short:
@@ -206,6 +228,24 @@ static bool elements_fit(cgltf_size size, cgltf_size offset, cgltf_size n, cgltf
     if (n == 0) return true;
     if (last > room) return false;
     return stride == 0 || n - 1 <= (room - last) / stride;
+}
+
+/* cgltf allocates a data: URI buffer's whole byteLength before it decodes a character, so a
+ * byteLength past what the URI's base64 text can hold is refused first (found by fuzz_gltf: a
+ * byteLength of -20, which cgltf reads as 2^64 - 20, went to the allocator as that). A buffer
+ * file's length is checked by gltf_read_file, the GLB binary chunk's by cgltf. */
+static vkrt_result check_data_uri_lengths(core *c, const char *path, const cgltf_data *data)
+{
+    for (cgltf_size i = 0; i < data->buffers_count; i++) {
+        const cgltf_buffer *b = &data->buffers[i];
+        const char *comma = b->uri && !strncmp(b->uri, "data:", 5) ? strchr(b->uri, ',') : NULL;
+        if (b->data || !comma) continue; /* cgltf names a data: URI without a comma unsupported */
+        size_t chars = strlen(comma + 1), holds = chars / 4 * 3 + chars % 4 * 3 / 4;
+        if (b->size > holds)
+            return core_fail(c, VKRT_ERROR_PARSE, "%s: buffer %zu: its byteLength (%lld) is more than its data: URI "
+                             "holds (%zu bytes)", path, (size_t)i, (long long)b->size, holds);
+    }
+    return VKRT_OK;
 }
 
 /* Every buffer view inside its buffer and every accessor inside its buffer view, before
@@ -744,20 +784,13 @@ static bool read_hidden_children(core *c, const char *json, size_t size, size_t 
 
 static vkrt_result read_whole_file(core *c, const char *path, char **out, size_t *out_size)
 {
-    FILE *f = fopen(path, "rb");
-    if (!f) return core_fail(c, VKRT_ERROR_IO, "%s: cannot open: %s", path, strerror(errno));
-    long size = -1;
-    if (fseek(f, 0, SEEK_END) == 0) size = ftell(f);
-    char *buf = size >= 0 && fseek(f, 0, SEEK_SET) == 0 ? core_alloc(c, (size_t)size) : NULL;
-    bool ok = buf && fread(buf, 1, (size_t)size, f) == (size_t)size;
-    fclose(f);
-    if (!ok) {
-        core_free(c, buf);
-        return buf || size < 0 ? core_fail(c, VKRT_ERROR_IO, "%s: cannot read the file", path)
-                               : core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "%s: out of memory reading the file", path);
-    }
-    *out = buf;
-    *out_size = (size_t)size;
+    void *bytes = NULL;
+    file_read_status status = file_read(c, path, 0, &bytes, out_size);
+    if (status == FILE_READ_OUT_OF_MEMORY)
+        return core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "%s: out of memory reading the file", path);
+    if (status != FILE_READ_OK)
+        return core_fail(c, VKRT_ERROR_IO, "%s: cannot read: %s", path, file_read_status_text(status, errno));
+    *out = bytes;
     return VKRT_OK;
 }
 
@@ -951,7 +984,8 @@ done:
 vkrt_result mesh_load_gltf(core *c, const char *path, mesh *m)
 {
     memset(m, 0, sizeof *m);
-    cgltf_options options = { .memory = { .alloc_func = gltf_alloc, .free_func = gltf_free, .user_data = c } };
+    cgltf_options options = { .memory = { .alloc_func = gltf_alloc, .free_func = gltf_free, .user_data = c },
+                              .file = { .read = gltf_read_file } };
     cgltf_data *data = NULL;
     char *file = NULL; /* only for a file with shared children */
     gltf_hierarchy h = { 0 };
@@ -975,6 +1009,7 @@ vkrt_result mesh_load_gltf(core *c, const char *path, mesh *m)
     }
     /* Before the buffers: a Draco-only file may have none vkrt could load anyway. */
     if ((r = check_required_extensions(c, path, data)) != VKRT_OK) goto done;
+    if ((r = check_data_uri_lengths(c, path, data)) != VKRT_OK) goto done;
     if ((cr = cgltf_load_buffers(&options, data, path)) != cgltf_result_success) {
         r = buffers_failure(c, path, data, cr);
         goto done;

@@ -3,9 +3,11 @@
  * no texture, so a model with a missing image still renders; only running out of memory fails. */
 #include "mesh.h"
 
+#include <errno.h>
 #include <stdio.h>
 #include <string.h>
 
+#include "file_read.h"
 #include "stb_image_glue.h"
 #include "texture.h"
 
@@ -72,32 +74,17 @@ vkrt_result mesh_add_texture_file(core *c, mesh *m, const char *path, vkrt_wrap 
                                   uint32_t *out_index)
 {
     *out_index = VKRT_NO_TEXTURE;
-    FILE *f = fopen(path, "rb");
-    if (!f) {
-        unreadable(c, source, what, path, "the file cannot be opened");
-        return VKRT_OK;
-    }
-    long length = -1;
-    uint8_t *bytes = NULL;
-    bool out_of_memory = false;
-    if (fseek(f, 0, SEEK_END) == 0) length = ftell(f);
-    if (length > 0 && fseek(f, 0, SEEK_SET) == 0) {
-        bytes = core_alloc(c, (size_t)length);
-        out_of_memory = !bytes;
-        if (bytes && fread(bytes, 1, (size_t)length, f) != (size_t)length) {
-            core_free(c, bytes);
-            bytes = NULL;
-        }
-    }
-    fclose(f);
-    if (out_of_memory)
+    void *bytes = NULL;
+    size_t length = 0;
+    file_read_status status = file_read(c, path, 0, &bytes, &length);
+    if (status == FILE_READ_OUT_OF_MEMORY)
         return core_fail(c, VKRT_ERROR_OUT_OF_MEMORY, "%s: %s: out of memory reading texture %s", source, what, path);
-    if (!bytes) {
-        unreadable(c, source, what, path, "the file cannot be read");
+    if (status != FILE_READ_OK) {
+        unreadable(c, source, what, path, file_read_status_text(status, errno));
         return VKRT_OK;
     }
     vkrt_result r =
-        mesh_add_texture_image(c, m, bytes, (size_t)length, wrap_u, wrap_v, encoding, path, source, what, out_index);
+        mesh_add_texture_image(c, m, bytes, length, wrap_u, wrap_v, encoding, path, source, what, out_index);
     core_free(c, bytes);
     return r;
 }

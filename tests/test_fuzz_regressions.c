@@ -39,6 +39,17 @@ static const struct {
      * size_t: cgltf_validate's own range checks passed, and it read the index bound 68 bytes
      * before the buffer (undefined behaviour). */
     { "negative_view_offset.glb", VKRT_ERROR_PARSE, 0, "buffer view 0 reaches past the end of its buffer" },
+    /* Found by fuzz_gltf (written here by hand, as CI's artifact stayed on its machine): a data:
+     * URI buffer of byteLength -20, which cgltf reads as 2^64 - 20 and asked the allocator for
+     * before decoding a character (AddressSanitizer aborts on such a request). */
+    { "negative_data_uri_length.gltf", VKRT_ERROR_PARSE, 0, "is more than its data: URI holds" },
+    /* The same byteLength for a buffer file (this file itself), and a buffer and a texture whose
+     * URI "." names the directory they lie in, whose end ftell() puts at LLONG_MAX: cgltf's file
+     * reader and the texture reader asked the allocator for that much (src/file_read.c now
+     * learns a file's length first). A texture that cannot be read only loses the texture. */
+    { "negative_file_length.gltf", VKRT_ERROR_IO, 0, "not a file, or shorter than its byteLength" },
+    { "buffer_is_a_directory.gltf", VKRT_ERROR_IO, 0, "not a file, or shorter than its byteLength" },
+    { "texture_is_a_directory.gltf", VKRT_OK, 1, NULL },
 };
 
 static bool input_error(vkrt_result r)

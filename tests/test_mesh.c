@@ -1,7 +1,9 @@
 /* The mesh module: OBJ and glTF loading, triangle order, transforms, normals, normalisation,
  * the built-in scene, and a code plus a message naming the file for every kind of bad input. */
+#include <errno.h>
 #include <math.h>
 #include <stdbool.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -9,6 +11,7 @@
 
 #include "check.h"
 #include "failing_alloc.h"
+#include "file_read.h"
 #include "mesh.h"
 #include "scene_pack.h"
 #include "texture.h"
@@ -75,7 +78,8 @@ static void remove_temp_dir(void)
                                          "truncated_header.glb", "bad_json.gltf", "glb_named.obj", "cycle.gltf",
                                          "no_scene.gltf", "nan.gltf", "UPPER.OBJ", "light_nan.gltf",
                                          "light_inf.gltf", "light_negative.gltf", "light_overflow.gltf",
-                                         "light_unknown.gltf", "light_flat.gltf" };
+                                         "light_unknown.gltf", "light_flat.gltf", "ten_bytes.bin",
+                                         "empty.bin" };
     char path[256];
     for (size_t i = 0; i < sizeof names / sizeof names[0]; i++) {
         snprintf(path, sizeof path, "%s/%s", temp_dir(), names[i]);
@@ -684,6 +688,39 @@ static void missing_and_unreadable_files_are_io_errors_naming_the_file(void)
     free(box);
 }
 
+/* file_read learns a file's length before it allocates: what a mesh claims about a file (a
+ * byteLength of -20, a URI naming a directory) never becomes an allocation of that size. */
+static void file_read_learns_the_length_before_it_allocates(void)
+{
+    failing_allocator counted = { 0 };
+    core c;
+    core_init(&c, &(vkrt_allocator){ .alloc = failing_alloc, .free = failing_free, .user = &counted }, NULL, NULL);
+    const char *ten = temp_file("ten_bytes.bin", "0123456789", 10);
+    void *bytes = NULL;
+    size_t size = 99;
+    CHECK(file_read(&c, ten, 0, &bytes, &size) == FILE_READ_OK && size == 10 && !memcmp(bytes, "0123456789", 10));
+    core_free(&c, bytes);
+    CHECK(file_read(&c, ten, 4, &bytes, &size) == FILE_READ_OK && size == 4 && !memcmp(bytes, "0123", 4));
+    core_free(&c, bytes);
+    CHECK(counted.calls == 2 && counted.live == 0);
+    CHECK(file_read(&c, ten, 11, &bytes, &size) == FILE_READ_TOO_SHORT && !bytes && size == 0);
+    CHECK(file_read(&c, ten, (size_t)-20, &bytes, &size) == FILE_READ_TOO_SHORT && !bytes);
+    CHECK(file_read(&c, temp_dir(), 0, &bytes, &size) == FILE_READ_NOT_A_FILE && !bytes);
+    CHECK(file_read(&c, "/dev/zero", 0, &bytes, &size) == FILE_READ_NOT_A_FILE && !bytes);
+    CHECK(file_read(&c, DATA("does_not_exist.obj"), 0, &bytes, &size) == FILE_READ_CANNOT_OPEN && !bytes);
+    CHECK(strstr(file_read_status_text(FILE_READ_CANNOT_OPEN, errno), "No such file") != NULL);
+    CHECK(counted.calls == 2); /* none of the failures allocated */
+    CHECK(file_read(&c, temp_file("empty.bin", "", 0), 0, &bytes, &size) == FILE_READ_OK && bytes && size == 0);
+    core_free(&c, bytes);
+    counted.fail_at = counted.calls + 1;
+    CHECK(file_read(&c, ten, 0, &bytes, &size) == FILE_READ_OUT_OF_MEMORY && !bytes);
+    CHECK(counted.live == 0);
+    /* What no allocation can be does not reach the allocator either. */
+    long calls = counted.calls;
+    CHECK(core_alloc(&c, (size_t)-20) == NULL && core_alloc(&c, (size_t)PTRDIFF_MAX + 1) == NULL);
+    CHECK(counted.calls == calls);
+}
+
 static void obj_garbage_and_non_obj_text_are_parse_errors(void)
 {
     expect_failure(DATA("garbage.obj"), VKRT_ERROR_PARSE, "binary");
@@ -1221,6 +1258,7 @@ int main(void)
     RUN(meshes_triangle_counts_match_the_manifest);
     RUN(every_obj_and_gltf_of_the_model_set_matches_the_manifest);
     RUN(missing_and_unreadable_files_are_io_errors_naming_the_file);
+    RUN(file_read_learns_the_length_before_it_allocates);
     RUN(obj_garbage_and_non_obj_text_are_parse_errors);
     RUN(files_without_triangles_are_empty_scenes);
     RUN(obj_non_finite_coordinates_are_invalid_geometry);
