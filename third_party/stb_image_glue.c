@@ -50,24 +50,43 @@ static uint32_t be32(const uint8_t *p)
     return (uint32_t)p[0] << 24 | (uint32_t)p[1] << 16 | (uint32_t)p[2] << 8 | p[3];
 }
 
-/* A PNG whose data stream starts with an empty IDAT chunk makes this stb_image (Debian's
- * 2.27) compute NULL + 0 before it has a buffer (undefined behaviour, found by fuzz_gltf). An
- * empty IDAT carries no data, so the same image without those chunks decodes identically: the
- * copy (allocated through the decode's allocator; NULL when nothing needs dropping or memory
+/* What this stb_image (Debian's 2.27) trips over in a PNG's chunks, found before it decodes,
+ * up to IEND, where it stops reading. Both were found by fuzz_gltf:
+ * - An empty IDAT chunk at the start of the data stream makes it compute NULL + 0 before it has
+ *   a buffer (undefined behaviour).
+ * - An IDAT chunk that claims more bytes than follow it makes it grow its data buffer to hold
+ *   them, doubling, before it finds they are not there: a 4 KB file asked for 2 GiB. */
+typedef struct png_flaws {
+    int empty_idat;
+    int idat_past_end;
+} png_flaws;
+
+static png_flaws png_find_flaws(const uint8_t *bytes, size_t size)
+{
+    static const uint8_t signature[8] = { 0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n' };
+    png_flaws flaws = { 0, 0 };
+    if (size < 8 || memcmp(bytes, signature, 8) != 0) return flaws;
+    for (size_t off = 8; off + 8 <= size;) {
+        uint32_t len = be32(bytes + off);
+        int idat = memcmp(bytes + off + 4, "IDAT", 4) == 0;
+        if (len > size - off - 8) {
+            flaws.idat_past_end = idat; /* any other chunk cut short: stb_image reports it */
+            break;
+        }
+        if (idat && len == 0) flaws.empty_idat = 1;
+        if (memcmp(bytes + off + 4, "IEND", 4) == 0) break;
+        off += 12 + (size_t)len;
+    }
+    return flaws;
+}
+
+/* An empty IDAT carries no data, so the same image without those chunks decodes identically:
+ * the copy (allocated through the decode's allocator; NULL when nothing needs dropping or memory
  * runs out, *out_oom telling which) leaves every other chunk, CRC included, as it was. */
 static uint8_t *png_without_empty_idat(const uint8_t *bytes, size_t size, size_t *out_size, int *out_oom)
 {
-    static const uint8_t signature[8] = { 0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n' };
     *out_oom = 0;
-    if (size < 8 || memcmp(bytes, signature, 8) != 0) return NULL;
-    int empty = 0;
-    for (size_t off = 8; off + 12 <= size;) {
-        uint32_t len = be32(bytes + off);
-        if (len > size - off - 12) break; /* truncated: stb_image reports it */
-        if (len == 0 && memcmp(bytes + off + 4, "IDAT", 4) == 0) empty = 1;
-        off += 12 + (size_t)len;
-    }
-    if (!empty) return NULL;
+    if (!png_find_flaws(bytes, size).empty_idat) return NULL;
     uint8_t *copy = glue_malloc(size);
     if (!copy) {
         *out_oom = 1;
@@ -97,6 +116,10 @@ uint8_t *stb_image_glue_decode_rgba8(const stb_image_glue_allocator *allocator, 
     *reason = NULL;
     if (size > 0x7FFFFFFF) {
         *reason = "image larger than 2 GiB";
+        return NULL;
+    }
+    if (png_find_flaws(bytes, size).idat_past_end) {
+        *reason = "an IDAT chunk reaches past the end of the PNG";
         return NULL;
     }
     current = allocator;
