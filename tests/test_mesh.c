@@ -694,7 +694,8 @@ static void file_read_learns_the_length_before_it_allocates(void)
 {
     failing_allocator counted = { 0 };
     core c;
-    core_init(&c, &(vkrt_allocator){ .alloc = failing_alloc, .free = failing_free, .user = &counted }, NULL, NULL);
+    const vkrt_allocator allocator = failing_allocator_use(&counted);
+    core_init(&c, &allocator, NULL, NULL);
     const char *ten = temp_file("ten_bytes.bin", "0123456789", 10);
     void *bytes = NULL;
     size_t size = 99;
