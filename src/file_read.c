@@ -14,15 +14,17 @@ file_read_status file_read(core *c, const char *path, size_t size, void **out, s
     if (!f) return FILE_READ_CANNOT_OPEN;
     struct stat st;
     file_read_status status = FILE_READ_OK;
+    size_t want = 0;
     if (fstat(fileno(f), &st) != 0) {
         status = FILE_READ_FAILED;
     } else if (!S_ISREG(st.st_mode) || st.st_size < 0) {
         status = FILE_READ_NOT_A_FILE;
     } else if ((uintmax_t)st.st_size > SIZE_MAX || (size && size > (size_t)st.st_size)) {
         status = FILE_READ_TOO_SHORT;
+    } else {
+        want = size ? size : (size_t)st.st_size;
     }
     void *bytes = NULL;
-    size_t want = size ? size : (size_t)st.st_size;
     if (status == FILE_READ_OK && !(bytes = core_alloc(c, want))) status = FILE_READ_OUT_OF_MEMORY;
     /* The file may have shrunk since fstat(): a short read is the same as a short file. */
     if (status == FILE_READ_OK && fread(bytes, 1, want, f) != want)
