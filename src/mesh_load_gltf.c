@@ -239,7 +239,8 @@ static vkrt_result check_data_uri_lengths(core *c, const char *path, const cgltf
     for (cgltf_size i = 0; i < data->buffers_count; i++) {
         const cgltf_buffer *b = &data->buffers[i];
         const char *comma = b->uri && !strncmp(b->uri, "data:", 5) ? strchr(b->uri, ',') : NULL;
-        if (b->data || !comma) continue; /* cgltf names a data: URI without a comma unsupported */
+        /* The base64 URIs cgltf decodes; it calls any other data: URI unsupported. */
+        if (b->data || !comma || comma - b->uri < 7 || strncmp(comma - 7, ";base64", 7)) continue;
         size_t chars = strlen(comma + 1), holds = chars / 4 * 3 + chars % 4 * 3 / 4;
         if (b->size > holds)
             return core_fail(c, VKRT_ERROR_PARSE, "%s: buffer %zu: its byteLength (%lld) is more than its data: URI "

@@ -79,7 +79,7 @@ static void remove_temp_dir(void)
                                          "no_scene.gltf", "nan.gltf", "UPPER.OBJ", "light_nan.gltf",
                                          "light_inf.gltf", "light_negative.gltf", "light_overflow.gltf",
                                          "light_unknown.gltf", "light_flat.gltf", "ten_bytes.bin",
-                                         "empty.bin" };
+                                         "empty.bin", "plain_data_uri.gltf" };
     char path[256];
     for (size_t i = 0; i < sizeof names / sizeof names[0]; i++) {
         snprintf(path, sizeof path, "%s/%s", temp_dir(), names[i]);
@@ -774,6 +774,11 @@ static void gltf_required_extensions_vkrt_cannot_decode_are_unsupported(void)
     expect_failure(temp_text("unknown_ext.gltf", doc), VKRT_ERROR_UNSUPPORTED, "EXT_vkrt_unknown");
     snprintf(doc, size + 256, "{\"extensionsUsed\":[\"EXT_meshopt_compression\"],\"extensionsRequired\":[\"EXT_meshopt_compression\"],%s", text + 1);
     expect_failure(temp_text("meshopt.gltf", doc), VKRT_ERROR_UNSUPPORTED, "EXT_meshopt_compression");
+    /* A data: URI that is not base64 is unsupported whatever its byteLength: the check of a
+     * byteLength against its URI's text is for the base64 ones cgltf decodes. */
+    expect_failure(temp_text("plain_data_uri.gltf", "{\"asset\":{\"version\":\"2.0\"},\"buffers\":[{\"byteLength\":-20,"
+                                                    "\"uri\":\"data:application/octet-stream,AAAA\"}]}"),
+                   VKRT_ERROR_UNSUPPORTED, "unsupported uri");
     /* Quantization alone is decoded, so requiring it is fine. */
     snprintf(doc, size + 256, "{\"extensionsUsed\":[\"KHR_mesh_quantization\"],\"extensionsRequired\":[\"KHR_mesh_quantization\"],%s", text + 1);
     expect_triangles(temp_text("no_scene.gltf", doc), 6);
