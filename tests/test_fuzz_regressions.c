@@ -35,6 +35,9 @@ static const struct {
      * decoding (third_party/stb_image_glue.c). This one is corrupt further on: a warning, and
      * the material keeps its factors. */
     { "empty_idat_png.gltf", VKRT_OK, 12, NULL },
+    /* Written by hand: the same empty IDAT as the last chunk, its CRC missing, which the
+     * dropping walk had left in place (UBSan: NULL + 0 again). */
+    { "empty_idat_no_crc.gltf", VKRT_OK, 1, NULL },
     /* Found by fuzz_gltf: the embedded PNG's IDAT chunk claims more bytes than follow it, and
      * stb_image grew its buffer to 2 GiB before reading them; now refused first (a warning). */
     { "idat_past_the_end.glb", VKRT_OK, 12, NULL },

@@ -94,10 +94,12 @@ static uint8_t *png_without_empty_idat(const uint8_t *bytes, size_t size, size_t
     }
     memcpy(copy, bytes, 8);
     size_t off = 8, n = 8;
-    while (off + 12 <= size) {
+    /* The same walk as png_find_flaws: a last chunk may lack (part of) its CRC, and an empty
+     * IDAT there must go too (found by hand: the NULL + 0 again). */
+    while (off + 8 <= size) {
         uint32_t len = be32(bytes + off);
-        if (len > size - off - 12) break;
-        size_t chunk = 12 + (size_t)len;
+        if (len > size - off - 8) break;
+        size_t chunk = size - off - len < 12 ? size - off : 12 + (size_t)len;
         if (!(len == 0 && memcmp(bytes + off + 4, "IDAT", 4) == 0)) {
             memcpy(copy + n, bytes + off, chunk);
             n += chunk;
