@@ -61,21 +61,32 @@ typedef struct png_flaws {
     int idat_past_end;
 } png_flaws;
 
+/* The walk over a PNG's chunks, one step: the chunk whose header lies at off (inside the file).
+ * Sets *len to its data length and returns the bytes it takes in the file, 12 + *len, or less
+ * where the file ends inside its CRC; 0 where its data reaches past the end. */
+static size_t png_chunk_bytes(const uint8_t *bytes, size_t size, size_t off, uint32_t *len)
+{
+    *len = be32(bytes + off);
+    if (*len > size - off - 8) return 0;
+    return size - off - *len < 12 ? size - off : 12 + (size_t)*len;
+}
+
 static png_flaws png_find_flaws(const uint8_t *bytes, size_t size)
 {
     static const uint8_t signature[8] = { 0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n' };
     png_flaws flaws = { 0, 0 };
     if (size < 8 || memcmp(bytes, signature, 8) != 0) return flaws;
     for (size_t off = 8; off + 8 <= size;) {
-        uint32_t len = be32(bytes + off);
+        uint32_t len;
+        size_t chunk = png_chunk_bytes(bytes, size, off, &len);
         int idat = memcmp(bytes + off + 4, "IDAT", 4) == 0;
-        if (len > size - off - 8) {
+        if (!chunk) {
             flaws.idat_past_end = idat; /* any other chunk cut short: stb_image reports it */
             break;
         }
         if (idat && len == 0) flaws.empty_idat = 1;
         if (memcmp(bytes + off + 4, "IEND", 4) == 0) break;
-        off += 12 + (size_t)len;
+        off += chunk;
     }
     return flaws;
 }
@@ -97,9 +108,9 @@ static uint8_t *png_without_empty_idat(const uint8_t *bytes, size_t size, size_t
     /* The same walk as png_find_flaws: a last chunk may lack (part of) its CRC, and an empty
      * IDAT there must go too (found by hand: the NULL + 0 again). */
     while (off + 8 <= size) {
-        uint32_t len = be32(bytes + off);
-        if (len > size - off - 8) break;
-        size_t chunk = size - off - len < 12 ? size - off : 12 + (size_t)len;
+        uint32_t len;
+        size_t chunk = png_chunk_bytes(bytes, size, off, &len);
+        if (!chunk) break;
         if (!(len == 0 && memcmp(bytes + off + 4, "IDAT", 4) == 0)) {
             memcpy(copy + n, bytes + off, chunk);
             n += chunk;
