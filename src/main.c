@@ -389,8 +389,12 @@ static int usage_error(const char *fmt, const char *arg)
         value = argv[++i];                                                             \
     } while (0)
 
+/* vkrt_camera's default eye (vkrt.h), as --help gives it. */
+static const float DEFAULT_EYE[3] = { 0.0f, 0.0f, 1.5f };
+
 static int parse_args(int argc, char **argv, options *o)
 {
+    bool eye_given = false, target_given = false;
     for (int i = 2; i < argc; i++) {
         const char *arg = argv[i], *value = NULL;
         if (!strcmp(arg, "-o") || !strcmp(arg, "--output")) {
@@ -482,9 +486,11 @@ static int parse_args(int argc, char **argv, options *o)
             else return usage_error("unknown precision '%s' (float, double)", value);
         } else if (!strcmp(arg, "--eye")) {
             NEED_VALUE();
+            eye_given = true;
             if (!parse_vec3(value, o->render.camera.eye)) return usage_error("bad --eye '%s' (want X,Y,Z)", value);
         } else if (!strcmp(arg, "--target")) {
             NEED_VALUE();
+            target_given = true;
             if (!parse_vec3(value, o->render.camera.target)) return usage_error("bad --target '%s' (want X,Y,Z)", value);
         } else if (!strcmp(arg, "--up")) {
             NEED_VALUE();
@@ -562,6 +568,17 @@ static int parse_args(int argc, char **argv, options *o)
         } else {
             return usage_error("unexpected argument '%s' (one input file at most)", arg);
         }
+    }
+    /* The eye --help names as the default, which the API gives only to a camera whose eye and
+     * target are equal (vkrt_camera): --target alone would otherwise look from the origin. */
+    if (target_given && !eye_given) memcpy(o->render.camera.eye, DEFAULT_EYE, sizeof DEFAULT_EYE);
+    /* Typed points that are equal would be read as "the default view" and rendered from
+     * (0, 0, 1.5) without a word; --eye 0,0,0 alone (the target's default is the origin) too. */
+    const float *eye = o->render.camera.eye, *target = o->render.camera.target;
+    if ((eye_given || target_given) && eye[0] == target[0] && eye[1] == target[1] && eye[2] == target[2]) {
+        char point[96];
+        snprintf(point, sizeof point, "%g,%g,%g", (double)eye[0], (double)eye[1], (double)eye[2]);
+        return usage_error("--eye and --target are the same point (%s): the view has no direction", point);
     }
     return EXIT_OK;
 }

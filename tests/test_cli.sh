@@ -448,6 +448,16 @@ expect "unknown option" 2 "$vkrt" render --frobnicate
 expect "unknown mode" 2 "$vkrt" render --mode sepia
 expect "bad size" 2 "$vkrt" render --size 0x10
 expect "bad fov" 2 "$vkrt" render --fov 180
+expect "--eye and --target at one point" 2 "$vkrt" render --eye 1,2,3 --target 1,2,3 -o "$tmp/same_point.png" --size 8x8
+grep -q "same point (1,2,3)" "$tmp/err" && ok "the message names the point" || bad "the message names the point"
+expect "--eye at the default target" 2 "$vkrt" render --eye 0,0,0 -o "$tmp/same_point.png" --size 8x8
+expect "--target at the default eye" 2 "$vkrt" render --target 0,0,1.5 -o "$tmp/same_point.png" --size 8x8
+[ ! -e "$tmp/same_point.png" ] && ok "no file for a view without direction" || bad "no file for a view without direction"
+# --target alone keeps --help's default eye (0, 0, 1.5); it used to look from the origin.
+"$vkrt" render --backend cpu --target 0.2,0,0 -o "$tmp/target_only.pfm" --size 16x16 -q &&
+  "$vkrt" render --backend cpu --eye 0,0,1.5 --target 0.2,0,0 -o "$tmp/target_eye.pfm" --size 16x16 -q &&
+  cmp -s "$tmp/target_only.pfm" "$tmp/target_eye.pfm" && ok "--target alone looks from the default eye" ||
+  bad "--target alone looks from the default eye"
 expect "unknown command" 2 "$vkrt" paint
 expect "unknown output format" 2 "$vkrt" render -o "$tmp/out.bmp" --size 8x8
 [ ! -e "$tmp/out.bmp" ] && ok "no file for an unknown format" || bad "no file for an unknown format"
