@@ -494,7 +494,10 @@ static int parse_args(int argc, char **argv, options *o)
             if (!parse_vec3(value, o->render.camera.target)) return usage_error("bad --target '%s' (want X,Y,Z)", value);
         } else if (!strcmp(arg, "--up")) {
             NEED_VALUE();
+            const float *up = o->render.camera.up;
             if (!parse_vec3(value, o->render.camera.up)) return usage_error("bad --up '%s' (want X,Y,Z)", value);
+            /* The API reads a zero up as "the default (0, 1, 0)"; typed, it is a mistake. */
+            if (up[0] == 0 && up[1] == 0 && up[2] == 0) return usage_error("bad --up '%s' (a direction, not zero)", value);
         } else if (!strcmp(arg, "--fov")) {
             NEED_VALUE();
             if (!parse_float(value, &o->render.camera.fov_y_degrees) || o->render.camera.fov_y_degrees <= 0 ||

@@ -451,6 +451,7 @@ expect "bad fov" 2 "$vkrt" render --fov 180
 expect "--eye and --target at one point" 2 "$vkrt" render --eye 1,2,3 --target 1,2,3 -o "$tmp/same_point.png" --size 8x8
 grep -q "same point (1,2,3)" "$tmp/err" && ok "the message names the point" || bad "the message names the point"
 expect "--eye at the default target" 2 "$vkrt" render --eye 0,0,0 -o "$tmp/same_point.png" --size 8x8
+expect "--up of zero length" 2 "$vkrt" render --up 0,-0,0 -o "$tmp/same_point.png" --size 8x8
 expect "--target at the default eye" 2 "$vkrt" render --target 0,0,1.5 -o "$tmp/same_point.png" --size 8x8
 [ ! -e "$tmp/same_point.png" ] && ok "no file for a view without direction" || bad "no file for a view without direction"
 # --target alone keeps --help's default eye (0, 0, 1.5); it used to look from the origin.
