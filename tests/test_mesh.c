@@ -948,6 +948,121 @@ static void on_log(void *user, vkrt_log_level level, const char *message)
     if (level == VKRT_LOG_WARN) snprintf(last_warning + used, sizeof last_warning - used, "%s\n", message);
 }
 
+/* A JPEG written byte by byte: 8x8 grey, one component, every coefficient 0 (each Huffman
+ * table one code of one bit: DC category 0, AC end of block). `before_frame` goes between the
+ * quantisation table and the frame header, `after_scan` between the scan's data and EOI. */
+typedef struct jpeg_bytes {
+    uint8_t b[1024];
+    size_t n;
+} jpeg_bytes;
+
+static void jpeg_put(jpeg_bytes *j, const uint8_t *bytes, size_t n)
+{
+    if (n == 0 || j->n + n > sizeof j->b) return; /* (too long: never with the segments below) */
+    memcpy(j->b + j->n, bytes, n);
+    j->n += n;
+}
+
+/* A DHT segment of one table whose 16 counts are each `count` (16 * count codes, values 0). */
+static void jpeg_put_dht(jpeg_bytes *j, uint8_t table, uint8_t count)
+{
+    size_t codes = 16u * count, length = 2 + 17 + codes;
+    uint8_t head[5 + 16] = { 0xFF, 0xC4, (uint8_t)(length >> 8), (uint8_t)length, table };
+    memset(head + 5, count, 16);
+    jpeg_put(j, head, sizeof head);
+    uint8_t values[16 * 255] = { 0 };
+    jpeg_put(j, values, codes);
+}
+
+static jpeg_bytes grey_jpeg(const uint8_t *prefix, size_t prefix_n, const uint8_t *before_frame, size_t before_n,
+                            const uint8_t *after_scan, size_t after_n)
+{
+    jpeg_bytes j = { .n = 0 };
+    static const uint8_t soi[] = { 0xFF, 0xD8 };
+    uint8_t dqt[5 + 64] = { 0xFF, 0xDB, 0, 67, 0x00 };
+    memset(dqt + 5, 1, 64);
+    static const uint8_t sof[] = { 0xFF, 0xC0, 0, 11, 8, 0, 8, 0, 8, 1, 1, 0x11, 0 };
+    static const uint8_t dc[] = { 0xFF, 0xC4, 0, 20, 0x00, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0x00 };
+    static const uint8_t ac[] = { 0xFF, 0xC4, 0, 20, 0x10, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0x00 };
+    static const uint8_t sos[] = { 0xFF, 0xDA, 0, 8, 1, 1, 0x00, 0, 63, 0 };
+    static const uint8_t data[] = { 0x3F }; /* DC code 0, AC code 0 (end of block), then 1 bits */
+    static const uint8_t eoi[] = { 0xFF, 0xD9 };
+    jpeg_put(&j, prefix, prefix_n);
+    jpeg_put(&j, soi, sizeof soi);
+    jpeg_put(&j, dqt, sizeof dqt);
+    jpeg_put(&j, before_frame, before_n);
+    jpeg_put(&j, sof, sizeof sof);
+    jpeg_put(&j, dc, sizeof dc);
+    jpeg_put(&j, ac, sizeof ac);
+    jpeg_put(&j, sos, sizeof sos);
+    jpeg_put(&j, data, sizeof data);
+    jpeg_put(&j, after_scan, after_n);
+    jpeg_put(&j, eoi, sizeof eoi);
+    return j;
+}
+
+/* The texture a JPEG gives (its index, or VKRT_NO_TEXTURE), and *grey its first texel's red. */
+static uint32_t jpeg_texture(const jpeg_bytes *j, float *grey)
+{
+    mesh m = { 0 };
+    uint32_t index = VKRT_NO_TEXTURE;
+    last_warning[0] = '\0';
+    CHECK(mesh_add_texture_image(&g_core, &m, j->b, j->n, VKRT_WRAP_REPEAT, VKRT_WRAP_REPEAT, TEXTURE_LINEAR,
+                                 "grey.jpg", "test", "texture", &index) == VKRT_OK);
+    *grey = -1.0f;
+    if (index != VKRT_NO_TEXTURE) {
+        float texel[4];
+        vkrt_gpu_texture t = { 0, m.textures[index].width, m.textures[index].height, 0 };
+        texture_sample(&t, m.textures[index].texels, 0.5f, 0.5f, texel);
+        *grey = texel[0];
+    }
+    mesh_destroy(&g_core, &m);
+    return index;
+}
+
+/* stb_image 2.27 builds a Huffman table from its 16 code counts without checking that they
+ * total at most 256 and writes past the table's arrays (found by a fuzz_gltf run seeded with
+ * JPEG textures). Such tables are refused before stb_image reads the file, wherever stb_image
+ * would meet them: before the frame header (also behind fill bytes ahead of SOI) and between a
+ * scan and the next marker. Bytes that stb_image skips, an APP1 segment's payload here, are not
+ * read as a table, so a valid file holding FF C4 there still decodes. */
+static void jpeg_huffman_tables_over_256_codes_are_refused_before_decoding(void)
+{
+    float grey;
+    jpeg_bytes valid = grey_jpeg(NULL, 0, NULL, 0, NULL, 0);
+    CHECK_MSG(jpeg_texture(&valid, &grey) == 0 && fabsf(grey - 128.0f / 255.0f) < 0.01f, "grey %g: %s", (double)grey,
+              last_warning);
+
+    /* An APP1 whose payload looks like a DHT of 16 x 255 codes. */
+    uint8_t app1[4 + 4 + 21] = { 0xFF, 0xE1, 0, 2 + 4 + 21, 'E', 'x', 'i', 'f', 0xFF, 0xC4, 0x10, 0x13, 0x00 };
+    memset(app1 + 13, 0xFF, 16);
+    jpeg_bytes with_app = grey_jpeg(NULL, 0, app1, sizeof app1, NULL, 0);
+    CHECK_MSG(jpeg_texture(&with_app, &grey) == 0 && fabsf(grey - 128.0f / 255.0f) < 0.01f, "grey %g: %s",
+              (double)grey, last_warning);
+
+    /* 256 codes (16 x 16) fill a table exactly: not refused (the image stays undecodable for
+     * another reason or decodes; either way no warning about the table). */
+    jpeg_bytes full = { .n = 0 };
+    jpeg_put_dht(&full, 0x01, 16);
+    jpeg_bytes at_limit = grey_jpeg(NULL, 0, full.b, full.n, NULL, 0);
+    jpeg_texture(&at_limit, &grey);
+    CHECK_MSG(!strstr(last_warning, "more than 256"), "warning: %s", last_warning);
+
+    jpeg_bytes dht = { .n = 0 };
+    jpeg_put_dht(&dht, 0x01, 17); /* 272 codes */
+    static const uint8_t fill[] = { 0xFF, 0xFF };
+    const jpeg_bytes refused[] = {
+        grey_jpeg(NULL, 0, dht.b, dht.n, NULL, 0),
+        grey_jpeg(fill, sizeof fill - 1, dht.b, dht.n, NULL, 0), /* FF FF D8: stb_image skips the fill */
+        grey_jpeg(NULL, 0, NULL, 0, dht.b, dht.n),
+    };
+    for (size_t i = 0; i < sizeof refused / sizeof refused[0]; i++) {
+        CHECK_MSG(jpeg_texture(&refused[i], &grey) == VKRT_NO_TEXTURE, "case %zu decoded", i);
+        CHECK_MSG(strstr(last_warning, "grey.jpg") && strstr(last_warning, "Huffman table lists more than 256 codes"),
+                  "case %zu: warning '%s'", i, last_warning);
+    }
+}
+
 /* Base colour textures: read from PNG files beside the glTF, one table entry per texture, each
  * material pointing at its own; a texture file that does not exist is a warning naming it, and
  * the material keeps its factors without a texture. */
@@ -1277,6 +1392,7 @@ int main(void)
     RUN(obj_texture_coordinates_follow_the_faces);
     RUN(gltf_materials_and_texture_coordinates_load);
     RUN(gltf_base_colour_textures_load_and_a_missing_one_is_a_warning);
+    RUN(jpeg_huffman_tables_over_256_codes_are_refused_before_decoding);
     RUN(obj_mtl_materials_and_textures_follow_usemtl);
     RUN(gltf_punctual_lights_load_at_their_nodes_and_move_with_normalisation);
     RUN(gltf_spot_light_is_a_point_light_with_a_warning);

@@ -91,6 +91,84 @@ static png_flaws png_find_flaws(const uint8_t *bytes, size_t size)
     return flaws;
 }
 
+/* A JPEG's bytes as stb_image's reader gives them: 0 past the end. */
+static unsigned jpeg_byte(const uint8_t *bytes, size_t size, size_t at)
+{
+    return at < size ? bytes[at] : 0u;
+}
+
+static unsigned jpeg_be16(const uint8_t *bytes, size_t size, size_t at)
+{
+    return jpeg_byte(bytes, size, at) << 8 | jpeg_byte(bytes, size, at + 1);
+}
+
+/* stb_image's marker read (stbi__get_marker): a byte other than 0xFF is no marker (returned as
+ * 0xFF, its "none"); else the fill bytes 0xFF are skipped and the next byte is the marker. */
+static unsigned jpeg_marker(const uint8_t *bytes, size_t size, size_t *at)
+{
+    unsigned x = jpeg_byte(bytes, size, (*at)++);
+    if (x != 0xFF) return 0xFF;
+    while (x == 0xFF && *at <= size) x = jpeg_byte(bytes, size, (*at)++);
+    return x;
+}
+
+/* The DHT segment whose length field lies at `at`, read as stb_image's stbi__process_marker
+ * reads it: 1 where one of its tables lists more than 256 codes. This stb_image (Debian's 2.27)
+ * writes each code's length into a 257-entry array and its symbol into a 256-entry one without
+ * checking the 16 counts' total, so a larger total writes past both (found by fuzz_gltf; later
+ * stb_image versions refuse it). *end is set past the segment. */
+static int jpeg_dht_overflows(const uint8_t *bytes, size_t size, size_t at, size_t *end)
+{
+    long left = (long)jpeg_be16(bytes, size, at) - 2;
+    at += 2;
+    while (left > 0 && at <= size) {
+        unsigned q = jpeg_byte(bytes, size, at++), codes = 0;
+        if ((q >> 4) > 1 || (q & 15) > 3) break; /* stb_image refuses the table */
+        for (int i = 0; i < 16; i++) codes += jpeg_byte(bytes, size, at++);
+        if (codes > 256) return 1;
+        at += codes;
+        left -= 17 + (long)codes;
+    }
+    *end = at;
+    return 0;
+}
+
+/* Whether stb_image would overflow a Huffman table of this JPEG (jpeg_dht_overflows). Up to the
+ * frame header the walk is stb_image's own (stbi__decode_jpeg_header: SOI, then markers, each
+ * segment by its length, stray bytes between them skipped one at a time), so the bytes it skips
+ * (an APPn's ICC profile or EXIF thumbnail) are not read as tables. From there on, where tables
+ * may follow scans whose entropy-coded data only a decoder can walk exactly, every FF C4 (a DHT
+ * marker, the last of its fill bytes) is read as a DHT: stb_image can reach no table that does
+ * not start there, and a valid file holds those bytes nowhere else after its first scan. */
+static int jpeg_huffman_overflows(const uint8_t *bytes, size_t size)
+{
+    size_t at = 0, end;
+    if (jpeg_marker(bytes, size, &at) != 0xD8) return 0; /* no SOI: stb_image does not read it as a JPEG */
+    unsigned m = jpeg_marker(bytes, size, &at);
+    while (!(m >= 0xC0 && m <= 0xC2)) { /* SOF0-2 end the header */
+        if (m == 0xC4) {
+            if (jpeg_dht_overflows(bytes, size, at, &end)) return 1;
+            at = end;
+        } else if (m == 0xDD) {
+            at += 4;
+        } else if (m == 0xDB || (m >= 0xE0 && m <= 0xEF) || m == 0xFE) {
+            unsigned length = jpeg_be16(bytes, size, at);
+            if (length < 2) return 0; /* stb_image stops at a bad length */
+            at += length;
+        } else {
+            return 0; /* no marker, or one stb_image stops at */
+        }
+        m = jpeg_marker(bytes, size, &at);
+        while (m == 0xFF) {
+            if (at >= size) return 0;
+            m = jpeg_marker(bytes, size, &at);
+        }
+    }
+    for (; at + 1 < size; at++)
+        if (bytes[at] == 0xFF && bytes[at + 1] == 0xC4 && jpeg_dht_overflows(bytes, size, at + 2, &end)) return 1;
+    return 0;
+}
+
 /* An empty IDAT carries no data, so the same image without those chunks decodes identically:
  * the copy (allocated through the decode's allocator; NULL when nothing needs dropping or memory
  * runs out, *out_oom telling which) leaves every other chunk, CRC included, as it was. */
@@ -122,6 +200,14 @@ static uint8_t *png_without_empty_idat(const uint8_t *bytes, size_t size, size_t
     return copy;
 }
 
+/* Why stb_image must not be handed these bytes (NULL: they are safe to decode). */
+static const char *image_flaw(const uint8_t *bytes, size_t size)
+{
+    if (png_find_flaws(bytes, size).idat_past_end) return "an IDAT chunk reaches past the end of the PNG";
+    if (jpeg_huffman_overflows(bytes, size)) return "a JPEG Huffman table lists more than 256 codes";
+    return NULL;
+}
+
 uint8_t *stb_image_glue_decode_rgba8(const stb_image_glue_allocator *allocator, const void *bytes, size_t size,
                                      uint32_t *out_width, uint32_t *out_height, const char **reason)
 {
@@ -131,10 +217,7 @@ uint8_t *stb_image_glue_decode_rgba8(const stb_image_glue_allocator *allocator, 
         *reason = "image larger than 2 GiB";
         return NULL;
     }
-    if (png_find_flaws(bytes, size).idat_past_end) {
-        *reason = "an IDAT chunk reaches past the end of the PNG";
-        return NULL;
-    }
+    if ((*reason = image_flaw(bytes, size))) return NULL;
     current = allocator;
     int w = 0, h = 0, channels = 0, oom = 0;
     size_t clean_size = 0;
@@ -159,7 +242,7 @@ int stb_image_glue_info(const stb_image_glue_allocator *allocator, const void *b
 {
     int w = 0, h = 0, channels = 0;
     *out_width = *out_height = 0;
-    if (size > 0x7FFFFFFF) return 0;
+    if (size > 0x7FFFFFFF || image_flaw(bytes, size)) return 0;
     current = allocator;
     int ok = stbi_info_from_memory(bytes, (int)size, &w, &h, &channels);
     current = NULL;
