@@ -88,7 +88,7 @@ vkrt_result mesh_add_material(core *c, mesh *m, const vkrt_material *material, c
 vkrt_result mesh_add_texture(core *c, mesh *m, const vkrt_texture_desc *desc, texture_encoding encoding,
                              vkrt_result invalid, const char *source, const char *what, uint32_t *out_index);
 
-/* Decodes an image (PNG, JPEG and the other formats stb_image reads) and adds it as a texture.
+/* Decodes an image (PNG, JPEG, TGA or BMP, through stb_image) and adds it as a texture.
  * An image that cannot be decoded is a warning naming `name` (with `source` and `what`) and
  * *out_index = VKRT_NO_TEXTURE: only running out of memory fails. */
 vkrt_result mesh_add_texture_image(core *c, mesh *m, const void *bytes, size_t size, vkrt_wrap wrap_u, vkrt_wrap wrap_v,

@@ -1063,6 +1063,63 @@ static void jpeg_huffman_tables_over_256_codes_are_refused_before_decoding(void)
     }
 }
 
+/* Textures are PNG, JPEG, TGA or BMP (glTF allows the first two; OBJ exporters write all four);
+ * stb_image's other decoders are not built, as its 16-bit PNM path read past its buffer (found
+ * by fuzz_gltf) and its GIF decoder has published memory-safety bugs. Each image here is 1x1 or
+ * 2x1, written byte by byte; the refused ones are a warning and no texture. */
+static void texture_formats_are_png_jpeg_tga_and_bmp(void)
+{
+    /* 24-bit BMP, one pixel (B, G, R = 10, 20, 200), its row padded to four bytes. */
+    static const uint8_t bmp[] = { 'B', 'M', 58, 0, 0, 0, 0, 0, 0, 0, 54, 0, 0, 0, 40, 0, 0, 0, 1, 0, 0, 0, 1, 0,
+                                   0, 0, 1, 0, 24, 0, 0, 0, 0, 0, 4, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,
+                                   0, 0, 0, 0, 0, 0, 10, 20, 200, 0 };
+    /* Uncompressed true-colour TGA, one pixel (B, G, R = 10, 20, 200). */
+    static const uint8_t tga[] = { 0, 0, 2, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1, 0, 1, 0, 24, 0, 10, 20, 200 };
+    /* 16-bit PGM (maxval 525), two pixels: the PNM read that overran. */
+    static const uint8_t pgm16[] = { 'P', '5', '\n', '2', ' ', '1', '\n', '5', '2', '5', '\n', 1, 0, 2, 0 };
+    static const uint8_t ppm[] = { 'P', '6', ' ', '1', ' ', '1', ' ', '2', '5', '5', '\n', 200, 20, 10 };
+    /* GIF89a, 1x1, a two-colour table, one LZW-coded pixel (clear, 0, end: 0x44 0x01). */
+    static const uint8_t gif[] = { 'G', 'I', 'F', '8', '9', 'a', 1, 0, 1, 0, 0x80, 0, 0, 200, 20, 10, 0, 0, 0,
+                                   ',', 0, 0, 0, 0, 1, 0, 1, 0, 0, 2, 2, 0x44, 0x01, 0, ';' };
+    /* Photoshop, 1x1 RGB, 8 bits, uncompressed. */
+    static const uint8_t psd[] = { '8', 'B', 'P', 'S', 0, 1, 0, 0, 0, 0, 0, 0, 0, 3, 0, 0, 0, 1, 0, 0, 0, 1,
+                                   0, 8, 0, 3, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 200, 20, 10 };
+    static const uint8_t hdr[] = "#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 1 +X 1\n\x80\x40\x20\x81";
+    const struct {
+        const char *name;
+        const uint8_t *bytes;
+        size_t size;
+        bool decodes;
+    } images[] = {
+        { "one.bmp", bmp, sizeof bmp, true },     { "one.tga", tga, sizeof tga, true },
+        { "two.pgm", pgm16, sizeof pgm16, false }, { "one.ppm", ppm, sizeof ppm, false },
+        { "one.gif", gif, sizeof gif, false },    { "one.psd", psd, sizeof psd, false },
+        { "one.hdr", hdr, sizeof hdr - 1, false },
+    };
+    for (size_t i = 0; i < sizeof images / sizeof images[0]; i++) {
+        mesh m = { 0 };
+        uint32_t index = VKRT_NO_TEXTURE;
+        last_warning[0] = '\0';
+        CHECK(mesh_add_texture_image(&g_core, &m, images[i].bytes, images[i].size, VKRT_WRAP_REPEAT, VKRT_WRAP_REPEAT,
+                                     TEXTURE_LINEAR, images[i].name, "test", "texture", &index) == VKRT_OK);
+        if (images[i].decodes) {
+            CHECK_MSG(index == 0 && m.texture_count == 1, "%s: %s", images[i].name, last_warning);
+            if (index == 0) {
+                float texel[4];
+                vkrt_gpu_texture t = { 0, m.textures[0].width, m.textures[0].height, 0 };
+                texture_sample(&t, m.textures[0].texels, 0.5f, 0.5f, texel);
+                CHECK_MSG(fabsf(texel[0] - 200.0f / 255.0f) < 0.01f && fabsf(texel[2] - 10.0f / 255.0f) < 0.01f,
+                          "%s: texel %g %g %g", images[i].name, (double)texel[0], (double)texel[1], (double)texel[2]);
+            }
+        } else {
+            CHECK_MSG(index == VKRT_NO_TEXTURE && m.texture_count == 0, "%s decoded", images[i].name);
+            CHECK_MSG(strstr(last_warning, images[i].name) && strstr(last_warning, "not a PNG, JPEG, TGA or BMP image"),
+                      "%s: warning '%s'", images[i].name, last_warning);
+        }
+        mesh_destroy(&g_core, &m);
+    }
+}
+
 /* Base colour textures: read from PNG files beside the glTF, one table entry per texture, each
  * material pointing at its own; a texture file that does not exist is a warning naming it, and
  * the material keeps its factors without a texture. */
@@ -1393,6 +1450,7 @@ int main(void)
     RUN(gltf_materials_and_texture_coordinates_load);
     RUN(gltf_base_colour_textures_load_and_a_missing_one_is_a_warning);
     RUN(jpeg_huffman_tables_over_256_codes_are_refused_before_decoding);
+    RUN(texture_formats_are_png_jpeg_tga_and_bmp);
     RUN(obj_mtl_materials_and_textures_follow_usemtl);
     RUN(gltf_punctual_lights_load_at_their_nodes_and_move_with_normalisation);
     RUN(gltf_spot_light_is_a_point_light_with_a_warning);

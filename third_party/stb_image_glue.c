@@ -41,6 +41,15 @@ static void *glue_realloc(void *p, size_t size)
 #define STBI_REALLOC(p, size) glue_realloc(p, size)
 #define STBI_FREE(p) glue_free(p)
 #define STBI_NO_STDIO /* vkrt reads files itself and hands over bytes */
+/* The formats textures come in: glTF allows PNG and JPEG, and OBJ exporters write those, TGA and
+ * BMP. This stb_image's other decoders are left out, so a hostile model cannot reach them: its
+ * 16-bit PNM path reads past its buffer (found by fuzz_gltf seeded with every format), and its GIF
+ * decoder has published memory-safety bugs (CVE-2023-45661, -45664, -45666, -45667). */
+#define STBI_NO_GIF
+#define STBI_NO_PSD
+#define STBI_NO_PIC
+#define STBI_NO_PNM
+#define STBI_NO_HDR
 #define STB_IMAGE_STATIC
 #define STB_IMAGE_IMPLEMENTATION
 #include <stb_image.h>
@@ -228,6 +237,8 @@ uint8_t *stb_image_glue_decode_rgba8(const stb_image_glue_allocator *allocator, 
     } else {
         pixels = stbi_load_from_memory(clean ? clean : bytes, (int)(clean ? clean_size : size), &w, &h, &channels, 4);
         if (!pixels) *reason = stbi_failure_reason();
+        /* stb_image's words for bytes no decoder it was built with takes. */
+        if (!pixels && *reason && !strcmp(*reason, "unknown image type")) *reason = "not a PNG, JPEG, TGA or BMP image";
     }
     glue_free(clean);
     current = NULL;

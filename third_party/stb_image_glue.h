@@ -1,5 +1,6 @@
-/* Image decoding through stb_image (PNG, JPEG and the other formats it reads), with every
- * allocation going to the caller's allocator so vkrt's out-of-memory tests reach it too. */
+/* Image decoding through stb_image (PNG, JPEG, TGA and BMP; its other decoders are not built),
+ * with every allocation going to the caller's allocator so vkrt's out-of-memory tests reach it
+ * too, and files this stb_image would mishandle refused before it reads them. */
 #ifndef STB_IMAGE_GLUE_H
 #define STB_IMAGE_GLUE_H
 
