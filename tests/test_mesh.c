@@ -1063,6 +1063,64 @@ static void jpeg_huffman_tables_over_256_codes_are_refused_before_decoding(void)
     }
 }
 
+/* An allocator whose blocks come filled with one byte, as memory a process has used before may. */
+static void *filled_alloc(void *user, size_t size)
+{
+    void *p = malloc(size);
+    if (p) memset(p, *(const uint8_t *)user, size);
+    return p;
+}
+
+static void filled_free(void *user, void *pointer)
+{
+    (void)user;
+    free(pointer);
+}
+
+/* stb_image 2.27 decodes a scan with whatever Huffman table its selector names, defined by a DHT
+ * or not, from a decoder struct it never clears: an undefined table's entries were the
+ * allocator's leftovers (found by fuzz_gltf: a shift by 32 from such an entry, undefined
+ * behaviour). The glue clears every block it hands stb_image, so the same file decodes to the
+ * same texels whatever the memory held before: here a progressive JPEG whose AC scan names AC
+ * table 1, which no DHT defines, decoded with blocks filled with 0x00, 0x05 and 0xBE. */
+static void jpeg_scan_with_an_undefined_huffman_table_decodes_alike_from_any_memory(void)
+{
+    jpeg_bytes j = { .n = 0 };
+    static const uint8_t head[] = { 0xFF, 0xD8, 0xFF, 0xC2, 0, 11, 8, 0, 8, 0, 8, 1, 1, 0x11, 0 };
+    uint8_t dqt[5 + 64] = { 0xFF, 0xDB, 0, 67, 0x00 };
+    memset(dqt + 5, 1, 64);
+    static const uint8_t dc[] = { 0xFF, 0xC4, 0, 20, 0x00, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0x00 };
+    static const uint8_t dc_scan[] = { 0xFF, 0xDA, 0, 8, 1, 1, 0x00, 0, 0, 0, 0x7F };
+    /* AC table 1 (the selector's low nibble) is never defined. */
+    static const uint8_t ac_scan[] = { 0xFF, 0xDA, 0, 8, 1, 1, 0x01, 1, 63, 0, 0x55, 0xAA, 0x33, 0x0F, 0xFF, 0xD9 };
+    jpeg_put(&j, head, 2);
+    jpeg_put(&j, dqt, sizeof dqt);
+    jpeg_put(&j, head + 2, sizeof head - 2);
+    jpeg_put(&j, dc, sizeof dc);
+    jpeg_put(&j, dc_scan, sizeof dc_scan);
+    jpeg_put(&j, ac_scan, sizeof ac_scan);
+    static const uint8_t fills[] = { 0x00, 0x05, 0xBE };
+    uint32_t texels[3][2 * 64] = { { 0 } };
+    uint32_t index[3];
+    for (int f = 0; f < 3; f++) {
+        core c;
+        const vkrt_allocator filled = { filled_alloc, filled_free, (void *)&fills[f] };
+        core_init(&c, &filled, NULL, NULL);
+        mesh m = { 0 };
+        index[f] = VKRT_NO_TEXTURE;
+        CHECK(mesh_add_texture_image(&c, &m, j.b, j.n, VKRT_WRAP_REPEAT, VKRT_WRAP_REPEAT, TEXTURE_LINEAR, "scan.jpg",
+                                     "test", "texture", &index[f]) == VKRT_OK);
+        if (index[f] != VKRT_NO_TEXTURE && m.textures[0].width == 8 && m.textures[0].height == 8)
+            memcpy(texels[f], m.textures[0].texels, sizeof texels[f]);
+        mesh_destroy(&c, &m);
+    }
+    for (int f = 1; f < 3; f++) {
+        CHECK_MSG(index[f] == index[0], "fill 0x%02x: texture %u, fill 0x00: %u", fills[f], index[f], index[0]);
+        CHECK_MSG(!memcmp(texels[f], texels[0], sizeof texels[0]), "fill 0x%02x decodes other texels than 0x00",
+                  fills[f]);
+    }
+}
+
 /* Textures are PNG, JPEG, TGA or BMP (glTF allows the first two; OBJ exporters write all four);
  * stb_image's other decoders are not built, as its 16-bit PNM path read past its buffer (found
  * by fuzz_gltf) and its GIF decoder has published memory-safety bugs. Each image here is 1x1 or
@@ -1451,6 +1509,7 @@ int main(void)
     RUN(gltf_base_colour_textures_load_and_a_missing_one_is_a_warning);
     RUN(jpeg_huffman_tables_over_256_codes_are_refused_before_decoding);
     RUN(texture_formats_are_png_jpeg_tga_and_bmp);
+    RUN(jpeg_scan_with_an_undefined_huffman_table_decodes_alike_from_any_memory);
     RUN(obj_mtl_materials_and_textures_follow_usemtl);
     RUN(gltf_punctual_lights_load_at_their_nodes_and_move_with_normalisation);
     RUN(gltf_spot_light_is_a_point_light_with_a_warning);

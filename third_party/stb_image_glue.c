@@ -13,11 +13,17 @@ typedef struct block_header {
     size_t pad; /* keeps the payload 16-byte aligned */
 } block_header;
 
+/* Zeroed: this stb_image reads a JPEG scan's Huffman table whether or not a DHT defined it, from
+ * a decoder struct it allocates without clearing, so a file that never defines the table made it
+ * decode from whatever the allocator left there (found by fuzz_gltf: a shift by 32, undefined
+ * behaviour, from such a table's code length). Cleared, an undefined table is all zero: a wrong
+ * pixel in a broken file, the same on every run. */
 static void *glue_malloc(size_t size)
 {
     block_header *b = current->alloc(current->user, sizeof *b + size);
     if (!b) return NULL;
     b->size = size;
+    memset(b + 1, 0, size);
     return b + 1;
 }
 
