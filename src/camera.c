@@ -53,7 +53,7 @@ vkrt_result camera_setup_double(core *c, const vkrt_camera *camera, uint32_t wid
 
     dvec3 eye = from_floats(camera->eye), target = from_floats(camera->target);
     if (eye.x == target.x && eye.y == target.y && eye.z == target.z) {
-        eye = (dvec3){ 0.0, 0.0, 1.5 };
+        eye = (dvec3){ 0.0, 0.0, CAMERA_DEFAULT_EYE_Z };
         target = (dvec3){ 0.0, 0.0, 0.0 };
     }
     dvec3 up = from_floats(camera->up);

@@ -5,6 +5,9 @@
 #include "../shaders/vkrt_shared.h"
 #include "core.h"
 
+/* The eye of the default view (vkrt_camera: eye == target), looking at the origin. */
+#define CAMERA_DEFAULT_EYE_Z 1.5
+
 /* The ray-generation basis as doubles holding the push constants' float values: what the CPU
  * double-precision reference generates its rays from, in double (same fields and meaning as in
  * vkrt_gpu_push). */

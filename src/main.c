@@ -14,6 +14,7 @@
 #include "bench_modes.h"
 #ifdef VKRT_HAVE_EMBREE
 #include "bench_compare.h"
+#include "camera.h"
 #endif
 #include "stress.h"
 #include "vkrt.h"
@@ -389,9 +390,6 @@ static int usage_error(const char *fmt, const char *arg)
         value = argv[++i];                                                             \
     } while (0)
 
-/* vkrt_camera's default eye (vkrt.h), as --help gives it. */
-static const float DEFAULT_EYE[3] = { 0.0f, 0.0f, 1.5f };
-
 static int parse_args(int argc, char **argv, options *o)
 {
     bool eye_given = false, target_given = false;
@@ -574,7 +572,10 @@ static int parse_args(int argc, char **argv, options *o)
     }
     /* The eye --help names as the default, which the API gives only to a camera whose eye and
      * target are equal (vkrt_camera): --target alone would otherwise look from the origin. */
-    if (target_given && !eye_given) memcpy(o->render.camera.eye, DEFAULT_EYE, sizeof DEFAULT_EYE);
+    if (target_given && !eye_given) {
+        o->render.camera.eye[0] = o->render.camera.eye[1] = 0.0f;
+        o->render.camera.eye[2] = (float)CAMERA_DEFAULT_EYE_Z;
+    }
     /* Typed points that are equal would be read as "the default view" and rendered from
      * (0, 0, 1.5) without a word; --eye 0,0,0 alone (the target's default is the origin) too. */
     const float *eye = o->render.camera.eye, *target = o->render.camera.target;

@@ -18,13 +18,19 @@ typedef struct block_header {
  * decode from whatever the allocator left there (found by fuzz_gltf: a shift by 32, undefined
  * behaviour, from such a table's code length). Cleared, an undefined table is all zero: a wrong
  * pixel in a broken file, the same on every run. */
-static void *glue_malloc(size_t size)
+static void *glue_malloc_uncleared(size_t size)
 {
     block_header *b = current->alloc(current->user, sizeof *b + size);
     if (!b) return NULL;
     b->size = size;
-    memset(b + 1, 0, size);
     return b + 1;
+}
+
+static void *glue_malloc(size_t size)
+{
+    void *p = glue_malloc_uncleared(size);
+    if (p) memset(p, 0, size);
+    return p;
 }
 
 static void glue_free(void *p)
@@ -35,10 +41,11 @@ static void glue_free(void *p)
 static void *glue_realloc(void *p, size_t size)
 {
     if (!p) return glue_malloc(size);
-    void *fresh = glue_malloc(size);
+    void *fresh = glue_malloc_uncleared(size);
     if (!fresh) return NULL;
-    size_t old = ((block_header *)p - 1)->size;
-    memcpy(fresh, p, old < size ? old : size);
+    size_t old = ((block_header *)p - 1)->size, kept = old < size ? old : size;
+    memcpy(fresh, p, kept);
+    memset((char *)fresh + kept, 0, size - kept); /* cleared past what was kept, as glue_malloc */
     glue_free(p);
     return fresh;
 }
