@@ -14,8 +14,8 @@
 #include "bench_modes.h"
 #ifdef VKRT_HAVE_EMBREE
 #include "bench_compare.h"
-#include "camera.h"
 #endif
+#include "camera.h"
 #include "stress.h"
 #include "vkrt.h"
 
