@@ -98,6 +98,9 @@ layout(set = 0, binding = VKRT_BINDING_HIT_WORDS, r32ui) uniform uimageBuffer hi
 /* The wide ray trace's record of each ray's closest triangle so far, by ray slot (a slot's
  * VKRT_WIDE_RAYS_PER_LANE words together; see store_slot_tri). */
 layout(set = 0, binding = VKRT_BINDING_SLOT_TRIS, r32ui) uniform uimageBuffer slot_tris;
+/* The binned traversal's lists (TRAVERSAL_BINNED; one-texel placeholders otherwise). */
+layout(set = 0, binding = VKRT_BINDING_RAY_LISTS, r32ui) readonly uniform uimageBuffer ray_lists;
+layout(set = 0, binding = VKRT_BINDING_LIST_TRIS, r32ui) readonly uniform uimageBuffer list_tris;
 /* A split scene's piece addresses (a placeholder otherwise): the nodes, triangles and surfaces
  * bindings then hold only the first piece of each. */
 layout(set = 0, binding = VKRT_BINDING_PIECES, std430) readonly buffer Pieces {
@@ -601,8 +604,43 @@ void finish_buffer_rays_wide()
     }
 }
 
+/* vkrt_trace_rays of rays that share one origin, on a CPU device (TRAVERSAL_BINNED): an
+ * invocation a ray, which tests the triangles the host listed for it (src/ray_bin.h) with the
+ * BVH's test and tie rule, so its closest hit is the wide traversal's; then does the wide
+ * finish's work for its hit in place (the refined distance; a miss writes its triangle word
+ * alone). Every list is short (ray_bin_limits), so no loop nears lavapipe's limit. */
+void trace_buffer_ray_binned()
+{
+    uint index = gl_WorkGroupID.x * VKRT_TRACE_GROUP_SIZE + gl_LocalInvocationIndex;
+    if (index >= p.tile_width) return;
+    ray r;
+    load_wide_ray(index, r);
+    uvec2 list = uvec2(imageLoad(ray_lists, int(2u * index)).x, imageLoad(ray_lists, int(2u * index + 1u)).x);
+    hit best = hit(r.tmax, 0.0, 0.0, NO_PRIM, NO_PRIM);
+    for (uint k = 0u; k < list.y; k++) {
+        uint tri_index = imageLoad(list_tris, int(list.x + k)).x;
+        bool last;
+        test_triangle_data(r, tri_index, load_wide_tri(tri_index, last), best);
+    }
+    if (best.prim == NO_PRIM) {
+        imageStore(hit_words, int(4u * index + HIT_TRI_WORD), uvec4(NO_PRIM));
+        return;
+    }
+    vkrt_gpu_hit h = vkrt_gpu_hit(best.t, best.prim, best.u, best.v);
+#ifdef VKRT_HAS_FLOAT64
+    bool last;
+    h.t = refine_hit_distance(dvec3(r.origin), dvec3(r.dir), double(r.tmin), double(r.tmax),
+                              load_wide_tri(best.tri, last), h.t);
+#endif
+    store_wide_hit(index, h);
+}
+
 void main()
 {
+    if (TRAVERSAL == VKRT_GPU_TRAVERSAL_BINNED) {
+        trace_buffer_ray_binned();
+        return;
+    }
     if (RAYGEN != VKRT_GPU_RAYGEN_CAMERA && WIDE != 0u) {
         if (FINISH != 0u) finish_buffer_rays_wide();
         else trace_buffer_rays_wide();

@@ -45,17 +45,20 @@ typedef struct vkrt_float3 { float x, y, z; } vkrt_float3;
 #define VKRT_BINDING_TEXTURES 11       /* vkrt_gpu_texture table (albedo) */
 #define VKRT_BINDING_TEXELS 12         /* every texture's texels: linear RGBA as 4 halves (uvec2) */
 #define VKRT_BINDING_PIECES 13         /* vkrt_gpu_address piece table of a split scene (VKRT_SPEC_SPLIT) */
-/* Bindings 14 .. 18 are storage texel buffers, the wide traversal's arrays (RGBA32UI but for
- * the last two): */
+/* Bindings 14 .. 20 are storage texel buffers, the wide traversal's arrays (RGBA32UI but for
+ * the last four, R32UI) and the binned traversal's lists: */
 #define VKRT_BINDING_WIDE_NODES 14     /* the wide BVH (VKRT_SPEC_WIDE), read only */
 #define VKRT_BINDING_TRACE_TRIS 15     /* its triangles, whole, read only */
 #define VKRT_BINDING_RAY_TEXELS 16     /* a view of the rays buffer, a ray two texels, read only */
 #define VKRT_BINDING_HIT_WORDS 17      /* an R32UI view of the hits buffer, a hit four texels */
 #define VKRT_BINDING_SLOT_TRIS 18      /* R32UI: each ray slot's closest triangles so far, a slot's
                                           VKRT_WIDE_RAYS_PER_LANE words together (wide ray traces) */
+#define VKRT_BINDING_RAY_LISTS 19      /* R32UI: each ray's first entry in LIST_TRIS and entry count
+                                          (binned traversal, src/ray_bin.h) */
+#define VKRT_BINDING_LIST_TRIS 20      /* R32UI: the rays' lists of triangles (wide array indices) */
 #define VKRT_BINDING_TEXEL_FIRST VKRT_BINDING_WIDE_NODES
-#define VKRT_BINDING_TEXEL_COUNT 5     /* the texel buffers, bindings 14 .. 18 */
-#define VKRT_BINDING_COUNT 19          /* bindings 0 .. 18: the image one, the texel buffers,
+#define VKRT_BINDING_TEXEL_COUNT 7     /* the texel buffers, bindings 14 .. 20 */
+#define VKRT_BINDING_COUNT 21          /* bindings 0 .. 20: the image one, the texel buffers,
                                           storage buffers the rest */
 
 /* Descriptor bindings of shade.comp (set 0): the lighting modes' wavefront stages. The ray and
@@ -117,6 +120,8 @@ typedef struct vkrt_float3 { float x, y, z; } vkrt_float3;
 #define VKRT_GPU_MODE_PATH 9
 #define VKRT_GPU_TRAVERSAL_BVH 1
 #define VKRT_GPU_TRAVERSAL_NAIVE 2
+#define VKRT_GPU_TRAVERSAL_BINNED 3 /* rays that share an origin, each testing the triangles the
+                                       host listed for it (src/ray_bin.h); a CPU device only */
 #define VKRT_GPU_HEAT_NODES 1
 #define VKRT_GPU_HEAT_LEAVES 2
 #define VKRT_GPU_HEAT_TRIS 3

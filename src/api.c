@@ -709,12 +709,14 @@ vkrt_result vkrt_trace_rays(vkrt_context *ctx, vkrt_scene *scene, const vkrt_tra
             .traversal = traversal, .intersector = d.intersector, .alpha_tested = scene->alpha_tested,
             .textured = scene->texture_count > 0, .any_hit = d.any_hit,
             .progress = d.progress, .progress_user = d.progress_user,
+            .tris = scene->tris, .threads = ctx->cpu_threads,
         };
         if ((r = ensure_surfaces(scene, false)) == VKRT_OK)
             r = ensure_arrays(scene, gpu_trace_rays_arrays(&scene->gpu, traversal));
         trace_counts counts = { 0 };
         if (r == VKRT_OK) r = gpu_trace_rays(ctx->vk, &scene->gpu, &p, rays, count, out_hits, &stats.trace_ms, &counts);
         stats.rays_culled = counts.rays_culled;
+        stats.rays_binned = counts.rays_binned;
         stats.submissions = counts.submissions;
     } else {
         cpu_trace_scene s = cpu_scene_of(scene);

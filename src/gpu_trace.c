@@ -7,6 +7,7 @@
 
 #include "cpu_trace.h"
 #include "gpu_pace.h"
+#include "ray_bin.h"
 #include "ray_cull.h"
 #include "vk_pipeline.h"
 #include "wide_pack.h"
@@ -374,6 +375,11 @@ typedef struct render_objects {
     VkBufferView hit_words, ray_texels; /* the wide traversal's views: R32UI of hits, RGBA32UI of rays */
     vk_buffer slot_tris;                /* the wide ray trace's triangles so far, by ray slot */
     VkBufferView slot_tri_words;        /* its R32UI view */
+    vk_buffer ray_lists;                /* the binned traversal's first entry and entry count, a ray */
+    VkBufferView ray_list_words;        /* its R32UI view */
+    vk_buffer list_tris_placeholder;    /* one texel, where no call's lists are bound */
+    VkBufferView list_tris_own;         /* its R32UI view */
+    VkBufferView list_tris;             /* what the set binds: the call's lists (borrowed) or list_tris_own */
     vk_buffer resume;
     vk_buffer resume_stack;
     vk_buffer unfinished; /* host-visible: read after every submission */
@@ -394,6 +400,10 @@ static void render_objects_destroy(vk_context *vk, render_objects *o)
     if (o->ray_texels) vkDestroyBufferView(vk->device, o->ray_texels, NULL);
     if (o->slot_tri_words) vkDestroyBufferView(vk->device, o->slot_tri_words, NULL);
     vk_buffer_destroy(vk, &o->slot_tris);
+    if (o->ray_list_words) vkDestroyBufferView(vk->device, o->ray_list_words, NULL);
+    vk_buffer_destroy(vk, &o->ray_lists);
+    if (o->list_tris_own) vkDestroyBufferView(vk->device, o->list_tris_own, NULL);
+    vk_buffer_destroy(vk, &o->list_tris_placeholder);
     vk_buffer_destroy(vk, &o->readback);
     vk_buffer_destroy(vk, &o->hits);
     vk_buffer_destroy(vk, &o->rays);
@@ -491,7 +501,9 @@ static vkrt_result create_descriptors(vk_context *vk, const gpu_scene *scene, Vk
                                               .dstBinding = VKRT_BINDING_IMAGE, .descriptorCount = 1,
                                               .descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_IMAGE, .pImageInfo = &image };
     const VkBufferView texels[VKRT_BINDING_TEXEL_COUNT] = { scene->wide_nodes.view, scene->trace_tris.view,
-                                                            o->ray_texels, o->hit_words, o->slot_tri_words };
+                                                            o->ray_texels,          o->hit_words,
+                                                            o->slot_tri_words,      o->ray_list_words,
+                                                            o->list_tris };
     for (uint32_t i = 0; i < VKRT_BINDING_TEXEL_COUNT; i++)
         writes[BUFFERS + 1 + i] = (VkWriteDescriptorSet){ .sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET,
                                                           .dstSet = o->set,
@@ -504,6 +516,8 @@ static vkrt_result create_descriptors(vk_context *vk, const gpu_scene *scene, Vk
                        VKRT_BINDING_RAY_TEXELS == VKRT_BINDING_TEXEL_FIRST + 2 &&
                        VKRT_BINDING_HIT_WORDS == VKRT_BINDING_TEXEL_FIRST + 3 &&
                        VKRT_BINDING_SLOT_TRIS == VKRT_BINDING_TEXEL_FIRST + 4 &&
+                       VKRT_BINDING_RAY_LISTS == VKRT_BINDING_TEXEL_FIRST + 5 &&
+                       VKRT_BINDING_LIST_TRIS == VKRT_BINDING_TEXEL_FIRST + 6 &&
                        VKRT_BINDING_TEXEL_FIRST + VKRT_BINDING_TEXEL_COUNT == VKRT_BINDING_COUNT,
                    "the texel buffers' bindings are adjacent, and the last");
     vkUpdateDescriptorSets(vk->device, sizeof writes / sizeof writes[0], writes, 0, NULL);
@@ -524,11 +538,13 @@ static vkrt_result create_readback(vk_context *vk, VkDeviceSize bytes, render_ob
  * (create_hit_readback) where the host reads the hits through a copy.
  * resume_slots: continuation slots of budgeted BVH traversal (0: none needed); counter_slots:
  * pixels whose traversal counters are written (0: not counting); slot_words: the words of the
- * wide ray trace's record by ray slot (ray_slot_words; 0: none needed). */
+ * wide ray trace's record by ray slot (ray_slot_words; 0: none needed); list_rays: rays whose
+ * binned lists (first entry, count) it holds (0: none); list_tris: the binned call's triangle
+ * lists, borrowed (VK_NULL_HANDLE: a placeholder of its own). */
 static vkrt_result create_render_objects(vk_context *vk, const gpu_scene *scene, VkDescriptorSetLayout layout,
                                          uint32_t tile_w, uint32_t tile_h, uint32_t hit_count, uint32_t ray_count,
                                          uint32_t resume_slots, uint32_t counter_slots, uint32_t slot_words,
-                                         render_objects *o)
+                                         uint32_t list_rays, VkBufferView list_tris, render_objects *o)
 {
     memset(o, 0, sizeof *o);
     vkrt_result r = create_image(vk, tile_w, tile_h, o);
@@ -556,6 +572,18 @@ static vkrt_result create_render_objects(vk_context *vk, const gpu_scene *scene,
                              &o->slot_tris);
     if (r == VKRT_OK)
         r = vk_buffer_view_create(vk, o->slot_tris.buffer, o->slot_tris.size, VK_FORMAT_R32_UINT, &o->slot_tri_words);
+    if (r == VKRT_OK)
+        r = vk_buffer_create(vk, (list_rays ? 2 * (VkDeviceSize)list_rays : 1) * sizeof(uint32_t),
+                             VK_BUFFER_USAGE_STORAGE_TEXEL_BUFFER_BIT, VK_MEMORY_DEVICE, "vkrt ray lists", &o->ray_lists);
+    if (r == VKRT_OK)
+        r = vk_buffer_view_create(vk, o->ray_lists.buffer, o->ray_lists.size, VK_FORMAT_R32_UINT, &o->ray_list_words);
+    if (r == VKRT_OK && !list_tris)
+        r = vk_buffer_create(vk, sizeof(uint32_t), VK_BUFFER_USAGE_STORAGE_TEXEL_BUFFER_BIT, VK_MEMORY_DEVICE,
+                             "vkrt list triangles placeholder", &o->list_tris_placeholder);
+    if (r == VKRT_OK && !list_tris)
+        r = vk_buffer_view_create(vk, o->list_tris_placeholder.buffer, o->list_tris_placeholder.size,
+                                  VK_FORMAT_R32_UINT, &o->list_tris_own);
+    o->list_tris = list_tris ? list_tris : o->list_tris_own;
     const VkDeviceSize slots = resume_slots ? resume_slots : 1;
     if (r == VKRT_OK)
         r = vk_buffer_create(vk, slots * sizeof(vkrt_gpu_resume), VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, VK_MEMORY_DEVICE,
@@ -872,14 +900,15 @@ static vk_buffer *hits_for_host(render_objects *o, hits_way hits)
 }
 
 static void record_rays(VkCommandBuffer cmd, const vk_trace_pipeline *pipe, const render_objects *o,
-                        const gpu_scene *scene, vkrt_gpu_push push, bool naive, bool budget, bool first_use,
-                        pass_range range, hits_way hits);
+                        const gpu_scene *scene, vkrt_gpu_push push, bool naive, bool binned, bool budget,
+                        bool first_use, pass_range range, hits_way hits);
 
 /* What one rectangle of an image or chunk of rays is traced with. */
 typedef struct pass_desc {
     const vk_trace_pipeline *pipe;
     const gpu_scene *scene;
     bool naive, budget;
+    bool binned;       /* a ray chunk through the binned traversal (src/ray_bin.h) */
     bool rays;         /* a ray chunk, else a rectangle of the image */
     hits_way hits;     /* where a chunk of rays leaves its hits (an image rectangle: unused) */
     bool first;        /* the first rectangle or chunk of the call */
@@ -913,7 +942,7 @@ static vkrt_result launch_first_pass(vk_context *vk, render_objects *o, const pa
     VkCommandBuffer cmd;
     vkrt_result r = vk_commands_begin(vk, &cmd);
     if (r != VKRT_OK) return r;
-    record_rays(cmd, d->pipe, o, d->scene, push, false, d->budget, d->first, range, d->hits);
+    record_rays(cmd, d->pipe, o, d->scene, push, false, d->binned, d->budget, d->first, range, d->hits);
     out->submitted_ms = core_now_ms();
     return vk_commands_submit(vk, cmd, &out->submission);
 }
@@ -937,7 +966,7 @@ static vkrt_result submit_pass(vk_context *vk, render_objects *o, const pass_des
     vkrt_result r = vk_commands_begin(vk, &cmd);
     if (r != VKRT_OK) return r;
     if (d->rays)
-        record_rays(cmd, d->pipe, o, d->scene, push, d->naive, d->budget, d->first, *range, d->hits);
+        record_rays(cmd, d->pipe, o, d->scene, push, d->naive, d->binned, d->budget, d->first, *range, d->hits);
     else record_tile(cmd, d->pipe, o, d->scene, push, d->naive, d->budget, d->first, *range);
     const double t0 = core_now_ms();
     if ((r = vk_commands_submit_wait(vk, cmd)) != VKRT_OK) return r;
@@ -1081,7 +1110,8 @@ vkrt_result gpu_trace_render(vk_context *vk, const gpu_scene *scene, const gpu_t
     const uint32_t tile_h = height < TILE_SIZE ? height : TILE_SIZE;
     render_objects o;
     r = create_render_objects(vk, scene, pipe.set_layout, tile_w, tile_h, naive ? tile_w * tile_h : 1, 0,
-                              budget ? tile_w * tile_h : 0, variant.counters ? tile_w * tile_h : 0, 0, &o);
+                              budget ? tile_w * tile_h : 0, variant.counters ? tile_w * tile_h : 0, 0, 0,
+                              VK_NULL_HANDLE, &o);
     gpu_pacer pacer;
     pacer_for(vk, scene, naive, (uint64_t)tile_w * tile_h, &pacer);
     const uint32_t tiles_x = core_div_up(width, tile_w), tiles_y = core_div_up(height, tile_h);
@@ -1142,8 +1172,8 @@ vkrt_result gpu_trace_render(vk_context *vk, const gpu_scene *scene, const gpu_t
  * dispatch(es) over the rays, then a copy of the hits into the readback buffer where `hits`
  * says so. */
 static void record_rays(VkCommandBuffer cmd, const vk_trace_pipeline *pipe, const render_objects *o,
-                        const gpu_scene *scene, vkrt_gpu_push push, bool naive, bool budget, bool first_use,
-                        pass_range range, hits_way hits)
+                        const gpu_scene *scene, vkrt_gpu_push push, bool naive, bool binned, bool budget,
+                        bool first_use, pass_range range, hits_way hits)
 {
     /* The storage image is never written in ray mode, but its descriptor must be in the layout
      * it names. */
@@ -1159,7 +1189,10 @@ static void record_rays(VkCommandBuffer cmd, const vk_trace_pipeline *pipe, cons
     vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_HOST_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT | VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
                          VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT, 0, 1, &inputs, 0, NULL,
                          0, NULL);
-    record_dispatches(cmd, pipe, o, scene, push, naive, budget, range, ray_groups(scene, naive, push.tile_width), 1);
+    /* The binned traversal (no finish pass) takes one ray an invocation. */
+    const uint32_t groups =
+        binned ? core_div_up(push.tile_width, VKRT_TRACE_GROUP_SIZE) : ray_groups(scene, naive, push.tile_width);
+    record_dispatches(cmd, pipe, o, scene, push, naive, budget, range, groups, 1);
     if (hits == HITS_ON_DEVICE) return;
     if (hits == HITS_MAPPED) {
         /* The host reads the hits where the shader wrote them, after the fence. */
@@ -1228,6 +1261,10 @@ typedef struct ray_call {
     size_t count, next;     /* the call's rays; the first not yet read into a chunk */
     vkrt_hit *out_hits;
     bool naive, budget, cull;
+    bool binned;            /* through the lists of `bins` (ray_bin.h), in `list_tris` */
+    ray_bins bins;
+    vk_buffer list_tris;
+    VkBufferView list_tri_words;
     hits_way hits;
     uint32_t capacity, naive_chunks;
     gpu_pacer pacer;
@@ -1240,9 +1277,11 @@ typedef struct ray_call {
 static vkrt_result ray_chunk_create(ray_call *call, ray_chunk *c, bool readback)
 {
     vk_context *vk = call->vk;
-    vkrt_result r = create_render_objects(vk, call->scene, call->pipe.set_layout, 1, 1, call->capacity, call->capacity,
-                                          call->budget ? ray_resume_slots(call->scene, call->naive, call->capacity) : 0,
-                                          0, ray_slot_words(call->scene, call->naive, call->capacity), &c->o);
+    vkrt_result r = create_render_objects(
+        vk, call->scene, call->pipe.set_layout, 1, 1, call->capacity, call->capacity,
+        call->budget ? ray_resume_slots(call->scene, call->naive, call->capacity) : 0, 0,
+        call->binned ? 0 : ray_slot_words(call->scene, call->naive, call->capacity), call->binned ? call->capacity : 0,
+        call->binned ? call->list_tri_words : VK_NULL_HANDLE, &c->o);
     c->created = true;
     if (r == VKRT_OK && readback) r = create_hit_readback(vk, &c->o, call->capacity);
     if (r == VKRT_OK && call->cull && !(c->sent_index = core_calloc_array(vk->core, call->capacity, sizeof *c->sent_index)))
@@ -1257,6 +1296,21 @@ static void ray_chunk_destroy(vk_context *vk, ray_chunk *c)
     if (c->launched) vk_submission_wait(vk, &c->pass.submission);
     core_free(vk->core, c->sent_index);
     if (c->created) render_objects_destroy(vk, &c->o);
+}
+
+/* The binned lists (first entry, count) of chunk c's n rays, the first read at the call's
+ * position `first`, into its list buffer, in the order the rays were sent. */
+static vkrt_result ray_chunk_lists(ray_call *call, ray_chunk *c, size_t first, uint32_t n)
+{
+    vk_context *vk = call->vk;
+    uint32_t *words = c->o.ray_lists.mapped ? c->o.ray_lists.mapped : core_alloc_array(vk->core, n, 2 * sizeof *words);
+    if (!words) return core_fail(vk->core, VKRT_ERROR_OUT_OF_MEMORY, "out of memory for the lists of %u rays", n);
+    for (uint32_t i = 0; i < n; i++)
+        ray_bin_list(&call->bins, (uint32_t)(first + (call->cull ? c->sent_index[i] : i)), words + 2 * i);
+    if (c->o.ray_lists.mapped) return vk_buffer_flush(vk, &c->o.ray_lists);
+    const vkrt_result r = vk_buffer_upload(vk, &c->o.ray_lists, words, (VkDeviceSize)n * 2 * sizeof *words);
+    core_free(vk->core, words);
+    return r;
 }
 
 /* Reads the call's next rays into chunk c, as many as the pacer allows and its buffers hold:
@@ -1293,13 +1347,14 @@ static vkrt_result ray_chunk_fill(ray_call *call, ray_chunk *c)
             r = vk_buffer_upload(vk, &c->o.rays, call->rays + first, n * sizeof *call->rays);
             call->next += read;
         }
+        if (r == VKRT_OK && call->binned) r = ray_chunk_lists(call, c, first, (uint32_t)n);
         if (r != VKRT_OK) return r;
         c->first = first;
         c->sent = (uint32_t)n;
         c->push = (vkrt_gpu_push){ .tile_width = (uint32_t)n, .tile_height = 1, .tri_end = call->scene->tri_count,
                                    .tri_total = call->scene->tri_count, .last_chunk = 1 };
         c->desc = (pass_desc){ .pipe = &call->pipe, .scene = call->scene, .naive = call->naive, .budget = call->budget,
-                               .rays = true, .hits = call->hits, .first = !c->used, .what = "trace",
+                               .binned = call->binned, .rays = true, .hits = call->hits, .first = !c->used, .what = "trace",
                                .pacer = &call->pacer, .progress = call->params->progress,
                                .progress_user = call->params->progress_user, .fraction = fraction };
         return VKRT_OK;
@@ -1340,6 +1395,80 @@ static void ray_chunk_collect(ray_call *call, ray_chunk *c)
     c->sent = 0;
 }
 
+/* The binned traversal's terms (src/ray_bin.h). Its lists are built on the host, which on a CPU
+ * device is what runs the traversal too: the full dragon's million camera rays took 20-60 ms to
+ * list and 30-40 ms to trace, against 190-200 ms through the wide BVH (README, binned
+ * traversal). Listing costs every triangle's projection whatever the rays, so it needs enough
+ * rays for the scene's triangles; a list's loop runs as long as the longest of a SIMD group's
+ * eight, and lavapipe ends loops silently after 65,535 turns. */
+#define GPU_BIN_MIN_RAYS 16384u
+#define GPU_BIN_MAX_RAYS (1u << 22)
+#define GPU_BIN_TRIS_PER_RAY 1u     /* at most this many triangles a ray */
+#define GPU_BIN_ENTRIES_PER_RAY 16u /* all lists together, at most */
+#define GPU_BIN_MAX_LIST 4096u
+
+/* Whether a call's rays may take the binned traversal: a CPU device, closest hits through the
+ * BVH with the watertight test (whose rounding ray_bin.c's widening covers), no alpha test, the
+ * wide arrays' triangles to list, and rays enough for the triangles. */
+static bool binning_suits(const vk_context *vk, const gpu_scene *scene, const gpu_trace_rays_params *params,
+                          size_t count)
+{
+    return vk->properties.deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU && !vk->no_ray_binning && params->tris &&
+           params->traversal != VKRT_TRAVERSAL_NAIVE && !params->any_hit && !params->alpha_tested &&
+           params->intersector != VKRT_INTERSECTOR_MOLLER_TRUMBORE && scene->wide && scene->node_count &&
+           count >= GPU_BIN_MIN_RAYS && count <= GPU_BIN_MAX_RAYS &&
+           scene->tri_count <= (uint64_t)count * GPU_BIN_TRIS_PER_RAY;
+}
+
+/* Lists the call's rays' triangles on the host and puts the lists on the device, where the rays
+ * share one origin and the lists keep within the limits; call->binned says whether they did. */
+static vkrt_result bin_rays(ray_call *call)
+{
+    vk_context *vk = call->vk;
+    const gpu_scene *scene = call->scene;
+    uint64_t max_entries = (uint64_t)call->count * GPU_BIN_ENTRIES_PER_RAY;
+    if (max_entries > vk->properties.limits.maxTexelBufferElements)
+        max_entries = vk->properties.limits.maxTexelBufferElements;
+    if (max_entries > UINT32_MAX) max_entries = UINT32_MAX;
+    const ray_bin_limits limits = { .max_entries = (uint32_t)max_entries, .max_list = GPU_BIN_MAX_LIST };
+    const float box_min[3] = { scene->root.bmin.x, scene->root.bmin.y, scene->root.bmin.z };
+    const float box_max[3] = { scene->root.bmax.x, scene->root.bmax.y, scene->root.bmax.z };
+    ray_bin_outcome outcome;
+    vkrt_result r = ray_bin_plan(vk->core, &vk->bin_scratch, call->rays, (uint32_t)call->count, call->params->tris,
+                                 scene->tri_count, box_min, box_max, limits, call->params->threads, &call->bins,
+                                 &outcome);
+    if (r != VKRT_OK || outcome != RAY_BIN_BUILT) return r;
+    const uint32_t entries = call->bins.entry_count;
+    const VkDeviceSize bytes = (VkDeviceSize)(entries ? entries : 1) * sizeof(uint32_t);
+    r = vk_buffer_create(vk, bytes, VK_BUFFER_USAGE_STORAGE_TEXEL_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT,
+                         VK_MEMORY_DEVICE, "vkrt triangle lists", &call->list_tris);
+    if (r == VKRT_OK && call->list_tris.mapped) {
+        /* Written where the device reads them (a CPU device's memory is the host's). */
+        ray_bin_fill(&call->bins, call->list_tris.mapped);
+        r = vk_buffer_flush(vk, &call->list_tris);
+    } else if (r == VKRT_OK) {
+        uint32_t *lists = core_alloc_array(vk->core, entries ? entries : 1, sizeof *lists);
+        if (!lists) r = core_fail(vk->core, VKRT_ERROR_OUT_OF_MEMORY, "out of memory for %u list entries", entries);
+        if (lists) {
+            ray_bin_fill(&call->bins, lists);
+            r = vk_buffer_upload(vk, &call->list_tris, lists, bytes);
+        }
+        core_free(vk->core, lists);
+    }
+    if (r == VKRT_OK)
+        r = vk_buffer_view_create(vk, call->list_tris.buffer, call->list_tris.size, VK_FORMAT_R32_UINT,
+                                  &call->list_tri_words);
+    call->binned = r == VKRT_OK;
+    return r;
+}
+
+static void ray_call_destroy(ray_call *call)
+{
+    if (call->list_tri_words) vkDestroyBufferView(call->vk->device, call->list_tri_words, NULL);
+    vk_buffer_destroy(call->vk, &call->list_tris);
+    ray_bins_destroy(call->vk->core, &call->bins);
+}
+
 vkrt_result gpu_trace_rays(vk_context *vk, const gpu_scene *scene, const gpu_trace_rays_params *params,
                            const vkrt_ray *rays, size_t count, vkrt_hit *out_hits, double *out_device_ms,
                            trace_counts *out_counts)
@@ -1347,9 +1476,17 @@ vkrt_result gpu_trace_rays(vk_context *vk, const gpu_scene *scene, const gpu_tra
     assert(arrays_uploaded(scene, gpu_trace_rays_arrays(scene, params->traversal)));
     ray_call call = { .vk = vk, .scene = scene, .params = params, .rays = rays, .count = count, .out_hits = out_hits };
     call.naive = params->traversal == VKRT_TRAVERSAL_NAIVE;
-    const vk_trace_variant variant = ray_variant(vk, scene, params, VKRT_GPU_RAYGEN_BUFFER);
-    vkrt_result r = vk_trace_pipeline_get(vk, variant, &call.pipe);
-    if (r != VKRT_OK) return r;
+    vkrt_result r = binning_suits(vk, scene, params, count) ? bin_rays(&call) : VKRT_OK;
+    vk_trace_variant variant = ray_variant(vk, scene, params, VKRT_GPU_RAYGEN_BUFFER);
+    if (call.binned) {
+        variant.traversal = VKRT_GPU_TRAVERSAL_BINNED;
+        variant.budget = 0;
+    }
+    if (r == VKRT_OK) r = vk_trace_pipeline_get(vk, variant, &call.pipe);
+    if (r != VKRT_OK) {
+        ray_call_destroy(&call);
+        return r;
+    }
     call.budget = variant.budget != 0;
     /* With a budget, smaller chunks keep the continuation buffers small. */
     const uint32_t max_chunk = call.budget ? VKRT_RESUME_RAY_CHUNK : VKRT_RAY_CHUNK;
@@ -1394,9 +1531,12 @@ vkrt_result gpu_trace_rays(vk_context *vk, const gpu_scene *scene, const gpu_tra
     if (r == VKRT_OK && params->progress) params->progress(params->progress_user, "trace", 1.0f);
     ray_chunk_destroy(vk, &chunks[0]);
     ray_chunk_destroy(vk, &chunks[1]);
+    ray_call_destroy(&call);
     *out_device_ms = call.device_ms;
     *out_counts = (trace_counts){ .submissions = call.pacer.submissions,
-                                  .longest_submission_ms = call.pacer.longest_ms, .rays_culled = call.culled };
+                                  .longest_submission_ms = call.pacer.longest_ms,
+                                  .rays_culled = call.culled,
+                                  .rays_binned = call.binned ? count - call.culled : 0 };
     return r;
 }
 
@@ -1429,7 +1569,7 @@ vkrt_result gpu_wavefront_tracer_init(vk_context *vk, gpu_wavefront_tracer *t, c
     if (r == VKRT_OK)
         r = create_render_objects(vk, scene, t->pipe.set_layout, 1, 1, capacity, capacity,
                                   t->budget ? ray_resume_slots(scene, naive, capacity) : 0, 0,
-                                  ray_slot_words(scene, naive, capacity), &t->o);
+                                  ray_slot_words(scene, naive, capacity), 0, VK_NULL_HANDLE, &t->o);
     return r;
 }
 

@@ -123,6 +123,9 @@ typedef struct gpu_trace_rays_params {
     bool textured;                /* as in gpu_trace_params */
     vkrt_progress_fn progress;    /* may be NULL; called between submissions */
     void *progress_user;
+    const vkrt_gpu_tri *tris;     /* gpu_trace_rays: the scene's triangles in BVH order, whose lists
+                                     the binned traversal builds on a CPU device (NULL: none) */
+    uint32_t threads;             /* host threads that build them (0 counts as 1) */
 } gpu_trace_rays_params;
 
 /* The binary arrays a traversal of rays reads (gpu_trace_rays and the wavefront's tracers; the

@@ -7,6 +7,7 @@
 #include <unistd.h>
 
 #include "../shaders/vkrt_shared.h"
+#include "ray_bin.h"
 #include "tls_pin.h"
 #include "vk_pipeline.h"
 
@@ -459,6 +460,7 @@ void vk_context_destroy(vk_context *vk)
     }
     if (vk->messenger) vk->destroy_messenger(vk->instance, vk->messenger, NULL);
     if (vk->instance) vkDestroyInstance(vk->instance, NULL);
+    ray_bin_scratch_destroy(vk->core, vk->bin_scratch);
     core_free(vk->core, vk->pipeline_cache_path);
     core_free(vk->core, vk);
 }

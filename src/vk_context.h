@@ -74,6 +74,8 @@ typedef struct vk_context {
     uint32_t recycled_count;          /* oldest first */
     VkDeviceSize recycled_bytes;
     struct vk_pipelines *pipelines;   /* compiled lazily, owned (vk_pipeline.c) */
+    struct ray_bin_scratch *bin_scratch; /* the binned traversal's host memory, kept between calls
+                                         (ray_bin.h); owned */
     /* Test knobs: zero from vk_context_create, set by tests through this private header only. */
     VkDeviceSize scene_buffer_limit;  /* 0: the device's limits; else the most bytes one buffer of a
                                          scene's arrays may hold, so small scenes split into pieces
@@ -89,6 +91,7 @@ typedef struct vk_context {
     VkResult fail_result;
     bool fail_at_wait;
     bool no_wide_traversal;           /* scenes uploaded from now on keep to the binary BVH */
+    bool no_ray_binning;              /* vkrt_trace_rays never takes the binned traversal */
 } vk_context;
 
 /* How many lanes of a subgroup share their triangle reads in naive traversal: the largest power

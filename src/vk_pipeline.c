@@ -282,7 +282,10 @@ vkrt_result vk_trace_pipeline_get(vk_context *vk, vk_trace_variant variant, vk_t
     out->layout = p->layout;
     out->finish = VK_NULL_HANDLE;
     if ((r = variant_pipeline(vk, variant, &out->pipeline)) != VKRT_OK) return r;
-    if (!variant.wide || variant.raygen == VKRT_GPU_RAYGEN_CAMERA || variant.finish) return VKRT_OK;
+    /* The binned traversal writes its hits whole (trace_buffer_ray_binned). */
+    if (!variant.wide || variant.raygen == VKRT_GPU_RAYGEN_CAMERA || variant.finish ||
+        variant.traversal == VKRT_GPU_TRAVERSAL_BINNED)
+        return VKRT_OK;
     /* The finish tests one recorded triangle a ray: the budget and the any-hit rule do not
      * apply, so the trace variants that differ only there share it. */
     vk_trace_variant finish = variant;

@@ -527,6 +527,10 @@ typedef struct vkrt_trace_stats {
     uint64_t rays_culled;     /* GPU backend on a CPU device (lavapipe), BVH traversal: rays that
                                  cannot enter the scene's box, answered on the host as misses
                                  without reaching the device; 0 elsewhere */
+    uint64_t rays_binned;     /* GPU backend on a CPU device, closest hits: rays that share one
+                                 origin, traced through triangle lists built on the host instead
+                                 of the BVH (README, "Binned traversal"), with the same hits; 0
+                                 elsewhere */
     uint32_t submissions;     /* GPU: device submissions the call took */
 } vkrt_trace_stats;
 

@@ -10,6 +10,7 @@
 #include "context.h"
 #include "cpu_trace.h"
 #include "huge_pages.h"
+#include "ray_bin.h"
 #include "ray_offset.h"
 #include "shaders_embedded.h"
 #include "trace_fixtures.h"
@@ -906,6 +907,289 @@ static vkrt_scene *mesh_scene(vkrt_context *ctx, const float *pos, uint32_t vert
         &s);
     CHECK_MSG(r == VKRT_OK, "in-memory scene: %s", vkrt_context_last_error(ctx));
     return s;
+}
+
+/* Traces rays on the GPU where the binned traversal may take them and again kept to the BVH (the
+ * test knob), and counts the rays whose hits differ in any bit; *out_stats gets the first
+ * call's statistics. */
+static size_t binned_and_bvh_differences(vkrt_scene *s, const vkrt_trace_desc *desc, const vkrt_ray *rays, size_t n,
+                                         vkrt_trace_stats *out_stats, size_t *out_hits)
+{
+    vkrt_hit *a = malloc(n * sizeof *a), *b = malloc(n * sizeof *b);
+    vkrt_trace_stats sa = { 0 }, sb = { 0 };
+    vkrt_trace_desc d = desc ? *desc : (vkrt_trace_desc){ 0 };
+    d.out_stats = &sa;
+    vkrt_result r = vkrt_trace_rays(gpu, s, &d, rays, n, a);
+    CHECK_MSG(r == VKRT_OK, "binned trace: %s", vkrt_context_last_error(gpu));
+    gpu->vk->no_ray_binning = true;
+    d.out_stats = &sb;
+    r = vkrt_trace_rays(gpu, s, &d, rays, n, b);
+    gpu->vk->no_ray_binning = false;
+    CHECK_MSG(r == VKRT_OK, "BVH trace: %s", vkrt_context_last_error(gpu));
+    CHECK_MSG(sb.rays_binned == 0, "the knob kept %" PRIu64 " rays binned", sb.rays_binned);
+    size_t differ = 0, hits = 0;
+    for (size_t i = 0; i < n; i++) {
+        differ += memcmp(&a[i], &b[i], sizeof a[i]) != 0;
+        hits += b[i].prim_id != VKRT_NO_HIT;
+    }
+    *out_stats = sa;
+    *out_hits = hits;
+    free(a);
+    free(b);
+    return differ;
+}
+
+static void check_binned(vkrt_scene *s, const vkrt_trace_desc *desc, const vkrt_ray *rays, size_t n, bool listed,
+                         const char *what)
+{
+    vkrt_trace_stats st;
+    size_t hits, differ = binned_and_bvh_differences(s, desc, rays, n, &st, &hits);
+    fprintf(stderr, "  %s: %zu rays, %" PRIu64 " through lists, %" PRIu64 " missing the scene's box, %zu hits, %zu differ\n",
+            what, n, st.rays_binned, st.rays_culled, hits, differ);
+    CHECK_MSG(differ == 0, "%s: %zu of %zu rays' hits differ", what, differ, n);
+    CHECK_MSG(hits > 0, "%s: no ray hits", what);
+    /* Every ray that may enter the scene's box goes through the lists, or none. */
+    if (listed)
+        CHECK_MSG(st.rays_binned > 0 && st.rays_binned + st.rays_culled == n, "%s: %" PRIu64 " of %zu rays through lists",
+                  what, st.rays_binned, n);
+    else CHECK_MSG(st.rays_binned == 0, "%s: %" PRIu64 " rays through lists", what, st.rays_binned);
+}
+
+/* Rays from `eye` at every corner and edge midpoint of triangles (positions `pos`, 9 floats a
+ * triangle), exactly where two triangles meet, with some invalid rays and short ones mixed in:
+ * every triangle a ray may hit must be in its list. */
+static vkrt_ray *rays_at_corners(const float *pos, uint32_t tris, const float eye[3], size_t *out_n)
+{
+    const size_t n = (size_t)tris * 6;
+    vkrt_ray *rays = calloc(n, sizeof *rays);
+    test_rng rng = { 77 };
+    for (size_t i = 0; i < n; i++) {
+        const float *t = pos + i / 6 * 9;
+        const int k = (int)(i % 6);
+        float target[3];
+        for (int a = 0; a < 3; a++)
+            target[a] = k < 3 ? t[k * 3 + a] : 0.5f * (t[(k - 3) * 3 + a] + t[(k - 2) % 3 * 3 + a]);
+        for (int a = 0; a < 3; a++) {
+            rays[i].origin[a] = eye[a];
+            rays[i].dir[a] = target[a] - eye[a];
+        }
+        const double u = rng_uniform(&rng);
+        if (u < 0.01) rays[i].dir[0] = NAN;                               /* not valid: misses */
+        else if (u < 0.02) rays[i].dir[0] = rays[i].dir[1] = rays[i].dir[2] = 0.0f;
+        else if (u < 0.10) rays[i].tmax = (float)(0.999 + 0.002 * rng_uniform(&rng)); /* ends at the target */
+        else if (u < 0.15) rays[i].tmin = (float)(0.999 + 0.002 * rng_uniform(&rng)); /* starts there */
+    }
+    *out_n = n;
+    return rays;
+}
+
+/* Rays that share one origin take lists of the triangles each may hit, built on the host (on a
+ * CPU device: lavapipe, here): the same hits as the BVH bit for bit, on camera rays, on rays at
+ * the triangles' corners and edges, and where the lists would not suit (other rays, an eye
+ * inside the scene's box, directions too wide, lists too long, any-hit and Moller-Trumbore
+ * queries) the BVH takes the rays. */
+static void gpu_rays_sharing_an_origin_take_lists_with_the_bvh_hits(void)
+{
+    vkrt_scene *s = make_scene(gpu, VKRT_MODELS_DIR "/meshes/dragon_48k.obj", VKRT_BVH_BUILDER_DEFAULT);
+    if (!s) return;
+    const uint32_t w = 256, h = 192;
+    const size_t n = (size_t)w * h;
+    vkrt_ray *rays = malloc(n * sizeof *rays);
+    const vkrt_camera cameras[] = {
+        { .fov_y_degrees = 0.0f }, /* the default view */
+        { .eye = { 0.9f, 0.4f, -0.8f }, .target = { 0.0f, 0.05f, 0.0f }, .fov_y_degrees = 30.0f },
+        { .eye = { 0.05f, 1.3f, 0.2f }, .target = { 0.0f, 0.0f, 0.0f }, .up = { 0.0f, 0.0f, 1.0f } },
+        /* close to the mesh: its box nearly reaches the eye's plane, lists long at the edges */
+        { .eye = { 0.1f, 0.0f, 0.62f }, .target = { 0.1f, 0.0f, 0.0f }, .fov_y_degrees = 100.0f },
+    };
+    for (size_t c = 0; c < sizeof cameras / sizeof cameras[0]; c++) {
+        CHECK(vkrt_camera_rays(gpu, &cameras[c], w, h, rays, n) == VKRT_OK);
+        char what[64];
+        snprintf(what, sizeof what, "camera %zu", c);
+        check_binned(s, NULL, rays, n, true, what);
+    }
+    vkrt_scene_stats st;
+    CHECK(vkrt_scene_stats_get(s, &st) == VKRT_OK);
+    float *pos = malloc((size_t)st.triangles * 9 * sizeof *pos);
+    if (vkrt_scene_triangles_get(s, pos, (size_t)st.triangles * 9) == VKRT_OK) {
+        const float eyes[][3] = { { 0.0f, 0.0f, 1.5f }, { -1.1f, 0.7f, 0.3f } };
+        for (int e = 0; e < 2; e++) {
+            size_t m;
+            vkrt_ray *corner = rays_at_corners(pos, st.triangles, eyes[e], &m);
+            check_binned(s, NULL, corner, m, true, e ? "corners and edges, eye 1" : "corners and edges, eye 0");
+            /* The same rays as any-hit or Moller-Trumbore queries keep to the BVH. */
+            check_binned(s, &(vkrt_trace_desc){ .any_hit = true }, corner, m, false, "any hit");
+            check_binned(s, &(vkrt_trace_desc){ .intersector = VKRT_INTERSECTOR_MOLLER_TRUMBORE }, corner, m, false,
+                         "Moller-Trumbore");
+            free(corner);
+        }
+    }
+    free(pos);
+    /* Where the lists do not suit, the BVH. Rays from many origins: */
+    vkrt_ray *random = random_rays_in_box(n, 5);
+    check_binned(s, NULL, random, n, false, "many origins");
+    free(random);
+    /* An eye inside the scene's box: */
+    CHECK(vkrt_camera_rays(gpu, &(vkrt_camera){ .eye = { 0.0f, 0.0f, 0.1f }, .target = { 0.0f, 0.0f, -1.0f } }, w, h,
+                           rays, n) == VKRT_OK);
+    check_binned(s, NULL, rays, n, false, "eye inside the box");
+    /* Directions wider than the lists' projection takes: a camera's rays and their opposites. */
+    CHECK(vkrt_camera_rays(gpu, &(vkrt_camera){ .eye = { 0.0f, 0.0f, 3.0f }, .fov_y_degrees = 20.0f }, w, h, rays,
+                           n) == VKRT_OK);
+    for (size_t i = 1; i < n; i += 2)
+        for (int a = 0; a < 3; a++) rays[i].dir[a] = -rays[i].dir[a];
+    check_binned(s, NULL, rays, n, false, "opposite directions");
+    /* Too few rays for the scene's triangles: */
+    CHECK(vkrt_camera_rays(gpu, NULL, 64, 64, rays, n) == VKRT_OK);
+    check_binned(s, NULL, rays, 64 * 64, false, "few rays");
+    vkrt_scene_destroy(s);
+
+    /* Lists too long: 1,500 squares stacked across the whole view, both triangles of each in every
+     * ray's list. */
+    const uint32_t layers = 1500;
+    float *sq = malloc((size_t)layers * 4 * 3 * sizeof *sq);
+    uint32_t *idx = malloc((size_t)layers * 6 * sizeof *idx);
+    for (uint32_t l = 0; l < layers; l++) {
+        const float z = -0.2f - 0.0005f * (float)l;
+        const float corners[4][2] = { { -3, -3 }, { 3, -3 }, { 3, 3 }, { -3, 3 } };
+        for (int k = 0; k < 4; k++) {
+            sq[(l * 4 + k) * 3] = corners[k][0];
+            sq[(l * 4 + k) * 3 + 1] = corners[k][1];
+            sq[(l * 4 + k) * 3 + 2] = z;
+        }
+        const uint32_t q[6] = { 0, 1, 2, 0, 2, 3 };
+        for (int k = 0; k < 6; k++) idx[l * 6 + k] = l * 4 + q[k];
+    }
+    vkrt_scene *stack = mesh_scene(gpu, sq, layers * 4, idx, layers * 2, VKRT_BVH_BUILDER_DEFAULT);
+    if (stack) {
+        CHECK(vkrt_camera_rays(gpu, &(vkrt_camera){ .eye = { 0.0f, 0.0f, 1.0f }, .target = { 0.0f, 0.0f, 0.0f } }, w,
+                               h, rays, n) == VKRT_OK);
+        check_binned(stack, NULL, rays, n, false, "1,500 squares deep");
+        /* A few of them list well. */
+        vkrt_scene_destroy(stack);
+        stack = mesh_scene(gpu, sq, 6 * 4, idx, 6 * 2, VKRT_BVH_BUILDER_DEFAULT);
+        if (stack) check_binned(stack, NULL, rays, n, true, "6 squares deep");
+    }
+    vkrt_scene_destroy(stack);
+    free(sq);
+    free(idx);
+    free(rays);
+}
+
+/* The host's lists themselves (src/ray_bin.h), on a scene's own triangles: every slot written,
+ * each list in the triangles' order without repeats, and every triangle the watertight test
+ * hits (brute force over all of them) in the list of each ray checked: camera rays, and rays
+ * at the triangles' corners and edge midpoints. */
+static void ray_bin_lists_hold_every_triangle_a_ray_hits(void)
+{
+    vkrt_scene *s = make_scene(cpu, VKRT_MODELS_DIR "/meshes/dragon_11k.obj", VKRT_BVH_BUILDER_DEFAULT);
+    if (!s) return;
+    const uint32_t tris = s->bvh.tri_count;
+    float lo[3] = { INFINITY, INFINITY, INFINITY }, hi[3] = { -INFINITY, -INFINITY, -INFINITY };
+    for (uint32_t t = 0; t < tris; t++) {
+        const vkrt_float3 *v[3] = { &s->tris[t].v0, &s->tris[t].v1, &s->tris[t].v2 };
+        for (int k = 0; k < 3; k++) {
+            const float c[3] = { v[k]->x, v[k]->y, v[k]->z };
+            for (int a = 0; a < 3; a++) {
+                lo[a] = fminf(lo[a], c[a]);
+                hi[a] = fmaxf(hi[a], c[a]);
+            }
+        }
+    }
+    float *pos = malloc((size_t)tris * 9 * sizeof *pos);
+    for (uint32_t t = 0; t < tris; t++) {
+        const vkrt_float3 *v[3] = { &s->tris[t].v0, &s->tris[t].v1, &s->tris[t].v2 };
+        for (int k = 0; k < 3; k++) {
+            pos[t * 9 + k * 3] = v[k]->x;
+            pos[t * 9 + k * 3 + 1] = v[k]->y;
+            pos[t * 9 + k * 3 + 2] = v[k]->z;
+        }
+    }
+    size_t corner_n;
+    vkrt_ray *corner = rays_at_corners(pos, tris, (const float[3]){ 0.3f, -0.2f, 1.4f }, &corner_n);
+    const size_t camera_n = 160 * 120;
+    vkrt_ray *camera = malloc(camera_n * sizeof *camera);
+    CHECK(vkrt_camera_rays(cpu, NULL, 160, 120, camera, camera_n) == VKRT_OK);
+    const struct {
+        const vkrt_ray *rays;
+        size_t n, step;
+        const char *what;
+    } sets[] = { { camera, camera_n, 3, "camera" }, { corner, corner_n, 13, "corners and edges" } };
+    /* The camera's lists planned first without kept scratch, then with the scratch each plan
+     * leaves (the corners' plan after the camera's, the camera's again after theirs): the same
+     * lists. */
+    ray_bin_scratch *scratch = NULL;
+    uint32_t *first_lists = NULL, first_count = 0;
+    for (int pass = 0; pass < 3; pass++) {
+        const int set = pass % 2;
+        const vkrt_ray *rays = sets[set].rays;
+        const uint32_t n = (uint32_t)sets[set].n;
+        ray_bins bins;
+        ray_bin_outcome outcome;
+        const ray_bin_limits limits = { .max_entries = 64u * n, .max_list = 1u << 20 };
+        CHECK(ray_bin_plan(&s->ctx->core, pass ? &scratch : NULL, rays, n, s->tris, tris, lo, hi, limits, 2, &bins,
+                           &outcome) == VKRT_OK);
+        CHECK_MSG(outcome == RAY_BIN_BUILT, "%s: outcome %d", sets[set].what, (int)outcome);
+        if (outcome != RAY_BIN_BUILT) continue;
+        uint32_t *entries = malloc((size_t)(bins.entry_count ? bins.entry_count : 1) * sizeof *entries);
+        memset(entries, 0xFF, (size_t)bins.entry_count * sizeof *entries);
+        ray_bin_fill(&bins, entries);
+        if (pass == 2) {
+            CHECK_MSG(bins.entry_count == first_count && memcmp(entries, first_lists, first_count * sizeof *entries) == 0,
+                      "the camera's lists from kept scratch differ (%u entries, %u before)", bins.entry_count,
+                      first_count);
+            free(entries);
+            ray_bins_destroy(&s->ctx->core, &bins);
+            continue;
+        }
+        size_t unwritten = 0, unordered = 0, missing = 0, hits = 0, checked = 0, longest = 0;
+        for (uint32_t e = 0; e < bins.entry_count; e++) unwritten += entries[e] >= tris;
+        for (uint32_t i = 0; i < n; i++) {
+            uint32_t list[2];
+            ray_bin_list(&bins, i, list);
+            if (list[1] > longest) longest = list[1];
+            for (uint32_t k = 1; k < list[1]; k++) unordered += entries[list[0] + k] <= entries[list[0] + k - 1];
+            if (i % sets[set].step) continue;
+            checked++;
+            vkrt_gpu_ray ray;
+            memcpy(&ray, &rays[i], sizeof ray);
+            if (ray.tmax == 0.0f) ray.tmax = INFINITY;
+            for (uint32_t t = 0; t < tris; t += 4) {
+                const vkrt_gpu_tri *four[4];
+                for (int k = 0; k < 4; k++) four[k] = &s->tris[t + k < tris ? t + k : t];
+                float tt[4], uu[4], vv[4];
+                const unsigned mask = cpu_trace_watertight4_test(&ray, four, false, tt, uu, vv);
+                for (int k = 0; k < 4 && t + k < tris; k++) {
+                    if (!(mask >> k & 1)) continue;
+                    hits++;
+                    bool listed = false;
+                    for (uint32_t e = 0; e < list[1] && !listed; e++) listed = entries[list[0] + e] == t + k;
+                    missing += !listed;
+                }
+            }
+        }
+        fprintf(stderr, "  %s: %u rays, %u entries (longest %zu), %zu checked by brute force: %zu hits, %zu missing\n",
+                sets[set].what, n, bins.entry_count, longest, checked, hits, missing);
+        CHECK_MSG(unwritten == 0 && unordered == 0, "%s: %zu entries unwritten, %zu out of order", sets[set].what,
+                  unwritten, unordered);
+        CHECK_MSG(longest == bins.longest, "%s: longest list %zu, plan said %u", sets[set].what, longest, bins.longest);
+        CHECK_MSG(hits > checked / 4 && missing == 0, "%s: %zu of %zu hit triangles missing from lists",
+                  sets[set].what, missing, hits);
+        if (pass == 0) {
+            first_lists = entries;
+            first_count = bins.entry_count;
+        } else {
+            free(entries);
+        }
+        ray_bins_destroy(&s->ctx->core, &bins);
+    }
+    CHECK_MSG(scratch != NULL, "no scratch kept");
+    ray_bin_scratch_destroy(&s->ctx->core, scratch);
+    free(first_lists);
+    free(camera);
+    free(corner);
+    free(pos);
+    vkrt_scene_destroy(s);
 }
 
 /* The same mesh twice: *wide traced through the wide BVH, *binary kept to the binary one (the
@@ -1809,6 +2093,8 @@ int main(void)
     RUN(gpu_trace_rays_follow_the_documented_rules);
     RUN(gpu_trace_rays_match_cpu_and_naive);
     RUN(gpu_trace_rays_answer_rays_missing_the_scene_box_on_the_host);
+    RUN(ray_bin_lists_hold_every_triangle_a_ray_hits);
+    RUN(gpu_rays_sharing_an_origin_take_lists_with_the_bvh_hits);
     RUN(gpu_wide_traversal_matches_the_binary_one);
     RUN(gpu_wide_boxes_hold_rays_along_their_planes);
     RUN(gpu_deep_wide_bvhs_take_the_wide_traversal);

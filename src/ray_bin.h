@@ -1,0 +1,88 @@
+/* Lists of the triangles each ray may hit, for a set of rays that share one origin (the
+ * camera rays of vkrt_camera_rays, or any pinhole's): the GPU path on a CPU device (lavapipe)
+ * traces such rays by testing each one's list instead of walking the BVH.
+ *
+ * Seen from the shared origin o, a triangle whose corners all lie in front of a plane through o
+ * projects (x -> the direction of x - o) to the triangle of its projected corners, and a ray
+ * hits it only where the ray's own projected direction lies inside that. So every triangle is
+ * listed for the rays whose projected directions fall in its projected bounding box (widened
+ * far beyond the rounding of the projection and of the intersection test), found through a grid
+ * of about one cell a ray. A ray's list then holds every triangle the BVH's leaves could give it
+ * a hit on, and the device tests them with the same test and tie rule (closest distance, then
+ * lowest prim_id): the same hits, bit for bit. Ray classification (Arvo and Kirk 1987) with the
+ * origin fixed; a rasteriser whose coverage test is the ray's own intersection test.
+ *
+ * Internal; the library's allocator, no printing. */
+#ifndef VKRT_RAY_BIN_H
+#define VKRT_RAY_BIN_H
+
+#include <stdbool.h>
+#include <stdint.h>
+
+#include "../shaders/vkrt_shared.h"
+#include "core.h"
+#include "vkrt.h"
+
+/* A ray's cell where it is not valid (non-finite, or a zero direction): its list is empty. */
+#define RAY_BIN_NO_CELL UINT32_MAX
+
+typedef struct ray_bin_job ray_bin_job;
+
+typedef struct ray_bins {
+    uint32_t ray_count;
+    const uint32_t *ray_cell;   /* each ray's cell (RAY_BIN_NO_CELL: none) */
+    const uint32_t *cell_start; /* each cell's first entry, then one past the last cell's last */
+    uint32_t entry_count;       /* all lists together */
+    uint32_t longest;           /* the longest list */
+    ray_bin_job *job;           /* the plan's state, for ray_bin_fill */
+} ray_bins;
+
+/* What a set of rays must keep within for the lists to be built: past them the caller traces
+ * the rays through the BVH instead. */
+typedef struct ray_bin_limits {
+    uint32_t max_entries; /* all lists together */
+    uint32_t max_list;    /* one ray's list (lavapipe's loops end silently after 65,535 turns) */
+} ray_bin_limits;
+
+typedef enum ray_bin_outcome {
+    RAY_BIN_BUILT,          /* *out holds the lists */
+    RAY_BIN_ORIGINS_DIFFER, /* two valid rays start at different points, or none is valid */
+    RAY_BIN_WIDE_ANGLE,     /* some direction lies more than RAY_BIN_MAX_ANGLE_DEG off the axis */
+    RAY_BIN_BEHIND,         /* the scene's box reaches behind (or too near) the origin's plane */
+    RAY_BIN_TOO_LONG        /* the lists would pass `limits` */
+} ray_bin_outcome;
+
+/* The widest angle between a ray and the axis, the mean direction of up to RAY_BIN_AXIS_SAMPLES
+ * of the rays (a projection onto the plane at distance 1 along it stays within tan of this). */
+#define RAY_BIN_AXIS_SAMPLES 4096u
+#define RAY_BIN_MAX_ANGLE_DEG 75.0
+
+/* The host memory of a plan, kept between calls by a caller that wants later plans to reuse it
+ * (ray_bin_plan's `keep`): up to 192 MiB. */
+typedef struct ray_bin_scratch ray_bin_scratch;
+void ray_bin_scratch_destroy(core *c, ray_bin_scratch *s);
+
+/* Plans the lists of rays[0 .. ray_count) for triangles tris[0 .. tri_count), which lie in the
+ * box [box_min, box_max], on `threads` threads (0 counts as 1): each ray's cell and each cell's
+ * place in the lists, which ray_bin_fill then writes. *out_outcome says whether the rays suit
+ * (anything but RAY_BIN_BUILT leaves *out empty). keep (may be NULL): scratch a previous plan
+ * left, taken and handed back by ray_bins_destroy (or a failed plan). Fails only with
+ * VKRT_ERROR_OUT_OF_MEMORY. Ownership: free *out with ray_bins_destroy. */
+vkrt_result ray_bin_plan(core *c, ray_bin_scratch **keep, const vkrt_ray *rays, uint32_t ray_count,
+                         const vkrt_gpu_tri *tris, uint32_t tri_count, const float box_min[3], const float box_max[3],
+                         ray_bin_limits limits, uint32_t threads, ray_bins *out, ray_bin_outcome *out_outcome);
+/* Writes the lists, b->entry_count triangle indices, into `entries`, each cell's in the
+ * triangles' order. */
+void ray_bin_fill(ray_bins *b, uint32_t *entries);
+
+/* Ray i's list: its first entry and its entry count. */
+static inline void ray_bin_list(const ray_bins *b, uint32_t i, uint32_t out[2])
+{
+    const uint32_t cell = b->ray_cell[i];
+    out[0] = cell == RAY_BIN_NO_CELL ? 0 : b->cell_start[cell];
+    out[1] = cell == RAY_BIN_NO_CELL ? 0 : b->cell_start[cell + 1] - b->cell_start[cell];
+}
+
+void ray_bins_destroy(core *c, ray_bins *b);
+
+#endif
