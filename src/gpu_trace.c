@@ -1431,11 +1431,9 @@ static vkrt_result bin_rays(ray_call *call)
         max_entries = vk->properties.limits.maxTexelBufferElements;
     if (max_entries > UINT32_MAX) max_entries = UINT32_MAX;
     const ray_bin_limits limits = { .max_entries = (uint32_t)max_entries, .max_list = GPU_BIN_MAX_LIST };
-    const float box_min[3] = { scene->root.bmin.x, scene->root.bmin.y, scene->root.bmin.z };
-    const float box_max[3] = { scene->root.bmax.x, scene->root.bmax.y, scene->root.bmax.z };
     ray_bin_outcome outcome;
     vkrt_result r = ray_bin_plan(vk->core, &vk->bin_scratch, call->rays, (uint32_t)call->count, call->params->tris,
-                                 scene->tri_count, box_min, box_max, limits, call->params->threads, &call->bins,
+                                 scene->tri_count, &scene->root, limits, call->params->threads, &call->bins,
                                  &outcome);
     if (r != VKRT_OK || outcome != RAY_BIN_BUILT) return r;
     const uint32_t entries = call->bins.entry_count;

@@ -23,7 +23,8 @@
 #include "core.h"
 #include "vkrt.h"
 
-/* A ray's cell where it is not valid (non-finite, or a zero direction): its list is empty. */
+/* A ray's cell where it cannot enter the scene's box (or is not valid: non-finite, or a zero
+ * direction): its list is empty. */
 #define RAY_BIN_NO_CELL UINT32_MAX
 
 typedef struct ray_bin_job ray_bin_job;
@@ -49,7 +50,8 @@ typedef enum ray_bin_outcome {
     RAY_BIN_ORIGINS_DIFFER, /* two valid rays start at different points, or none is valid */
     RAY_BIN_WIDE_ANGLE,     /* some direction lies more than RAY_BIN_MAX_ANGLE_DEG off the axis */
     RAY_BIN_BEHIND,         /* the scene's box reaches behind (or too near) the origin's plane */
-    RAY_BIN_TOO_LONG        /* the lists would pass `limits` */
+    RAY_BIN_TOO_LONG,       /* the lists would pass `limits` */
+    RAY_BIN_NONE_ENTER      /* no ray may enter the scene's box: every one misses */
 } ray_bin_outcome;
 
 /* The widest angle between a ray and the axis, the mean direction of up to RAY_BIN_AXIS_SAMPLES
@@ -62,14 +64,15 @@ typedef enum ray_bin_outcome {
 typedef struct ray_bin_scratch ray_bin_scratch;
 void ray_bin_scratch_destroy(core *c, ray_bin_scratch *s);
 
-/* Plans the lists of rays[0 .. ray_count) for triangles tris[0 .. tri_count), which lie in the
- * box [box_min, box_max], on `threads` threads (0 counts as 1): each ray's cell and each cell's
- * place in the lists, which ray_bin_fill then writes. *out_outcome says whether the rays suit
+/* Plans the lists of rays[0 .. ray_count) for triangles tris[0 .. tri_count), which lie in
+ * `box` (the BVH's root), on `threads` threads (0 counts as 1): each ray's cell and each cell's
+ * place in the lists, which ray_bin_fill then writes. A ray that cannot enter the box by
+ * ray_cull_test4 (the test that keeps rays from the device) gets an empty list. *out_outcome says whether the rays suit
  * (anything but RAY_BIN_BUILT leaves *out empty). keep (may be NULL): scratch a previous plan
  * left, taken and handed back by ray_bins_destroy (or a failed plan). Fails only with
  * VKRT_ERROR_OUT_OF_MEMORY. Ownership: free *out with ray_bins_destroy. */
 vkrt_result ray_bin_plan(core *c, ray_bin_scratch **keep, const vkrt_ray *rays, uint32_t ray_count,
-                         const vkrt_gpu_tri *tris, uint32_t tri_count, const float box_min[3], const float box_max[3],
+                         const vkrt_gpu_tri *tris, uint32_t tri_count, const vkrt_gpu_node *box,
                          ray_bin_limits limits, uint32_t threads, ray_bins *out, ray_bin_outcome *out_outcome);
 /* Writes the lists, b->entry_count triangle indices, into `entries`, each cell's in the
  * triangles' order. */

@@ -909,6 +909,55 @@ static vkrt_scene *mesh_scene(vkrt_context *ctx, const float *pos, uint32_t vert
     return s;
 }
 
+/* The host's lists turn away the ray sets they do not suit, each for its reason. */
+static void ray_bin_says_why_rays_do_not_suit(void)
+{
+    vkrt_scene *s = make_scene(cpu, VKRT_MODELS_DIR "/meshes/dragon_11k.obj", VKRT_BVH_BUILDER_DEFAULT);
+    if (!s) return;
+    const uint32_t w = 128, h = 96, n = w * h;
+    vkrt_ray *rays = malloc((size_t)n * sizeof *rays);
+    const vkrt_gpu_node box = { .bmin = { -0.5f, -0.5f, -0.5f }, .bmax = { 0.5f, 0.5f, 0.5f } };
+    const struct {
+        vkrt_camera camera;
+        ray_bin_limits limits;
+        ray_bin_outcome expected;
+        const char *what;
+    } cases[] = {
+        { { .fov_y_degrees = 0.0f }, { 16u * n, 4096 }, RAY_BIN_BUILT, "the default view" },
+        { { .fov_y_degrees = 0.0f }, { 1000, 4096 }, RAY_BIN_TOO_LONG, "entries past the limit" },
+        { { .fov_y_degrees = 0.0f }, { 16u * n, 2 }, RAY_BIN_TOO_LONG, "a list past the limit" },
+        { { .eye = { 0.0f, 0.0f, 0.1f }, .target = { 0.0f, 0.0f, -1.0f } }, { 16u * n, 4096 }, RAY_BIN_BEHIND,
+          "an eye inside the box" },
+        { { .eye = { 0.0f, 0.0f, 1.5f }, .target = { 1.5f, 0.0f, 0.0f }, .fov_y_degrees = 4.0f },
+          { 16u * n, 4096 },
+          RAY_BIN_NONE_ENTER,
+          "rays beside the box" },
+    };
+    for (size_t k = 0; k < sizeof cases / sizeof cases[0]; k++) {
+        CHECK(vkrt_camera_rays(cpu, &cases[k].camera, w, h, rays, n) == VKRT_OK);
+        ray_bins bins;
+        ray_bin_outcome outcome;
+        CHECK(ray_bin_plan(&s->ctx->core, NULL, rays, n, s->tris, s->bvh.tri_count, &box, cases[k].limits, 2, &bins,
+                           &outcome) == VKRT_OK);
+        CHECK_MSG(outcome == cases[k].expected, "%s: outcome %d, expected %d", cases[k].what, (int)outcome,
+                  (int)cases[k].expected);
+        CHECK_MSG((outcome == RAY_BIN_BUILT) == (bins.job != NULL), "%s: plan left %s", cases[k].what,
+                  bins.job ? "state" : "none");
+        ray_bins_destroy(&s->ctx->core, &bins);
+    }
+    /* Rays from many origins. */
+    vkrt_ray *random = random_rays_in_box(n, 3);
+    ray_bins bins;
+    ray_bin_outcome outcome;
+    CHECK(ray_bin_plan(&s->ctx->core, NULL, random, n, s->tris, s->bvh.tri_count, &box, (ray_bin_limits){ 16u * n, 4096 },
+                       2, &bins, &outcome) == VKRT_OK &&
+          outcome == RAY_BIN_ORIGINS_DIFFER);
+    ray_bins_destroy(&s->ctx->core, &bins);
+    free(random);
+    free(rays);
+    vkrt_scene_destroy(s);
+}
+
 /* Traces rays on the GPU where the binned traversal may take them and again kept to the BVH (the
  * test knob), and counts the rays whose hits differ in any bit; *out_stats gets the first
  * call's statistics. */
@@ -1039,6 +1088,20 @@ static void gpu_rays_sharing_an_origin_take_lists_with_the_bvh_hits(void)
     for (size_t i = 1; i < n; i += 2)
         for (int a = 0; a < 3; a++) rays[i].dir[a] = -rays[i].dir[a];
     check_binned(s, NULL, rays, n, false, "opposite directions");
+    /* Rays that all pass beside the scene (its box in front of the eye): every one a miss, as
+     * through the BVH. */
+    CHECK(vkrt_camera_rays(gpu,
+                           &(vkrt_camera){ .eye = { 0.0f, 0.0f, 1.5f }, .target = { 1.5f, 0.0f, 0.0f }, .fov_y_degrees = 4.0f },
+                           w, h, rays, n) == VKRT_OK);
+    {
+        vkrt_trace_stats beside;
+        size_t hits, differ = binned_and_bvh_differences(s, NULL, rays, n, &beside, &hits);
+        fprintf(stderr, "  beside the scene: %zu hits, %" PRIu64 " through lists, %zu differ\n", hits,
+                beside.rays_binned, differ);
+        CHECK_MSG(hits == 0 && differ == 0 && beside.rays_binned == 0 && beside.rays_culled == n,
+                  "beside the scene: %zu hits, %zu differ, %" PRIu64 " binned, %" PRIu64 " culled", hits, differ,
+                  beside.rays_binned, beside.rays_culled);
+    }
     /* Too few rays for the scene's triangles: */
     CHECK(vkrt_camera_rays(gpu, NULL, 64, 64, rays, n) == VKRT_OK);
     check_binned(s, NULL, rays, 64 * 64, false, "few rays");
@@ -1096,6 +1159,7 @@ static void ray_bin_lists_hold_every_triangle_a_ray_hits(void)
             }
         }
     }
+    const vkrt_gpu_node box = { .bmin = { lo[0], lo[1], lo[2] }, .bmax = { hi[0], hi[1], hi[2] } };
     float *pos = malloc((size_t)tris * 9 * sizeof *pos);
     for (uint32_t t = 0; t < tris; t++) {
         const vkrt_float3 *v[3] = { &s->tris[t].v0, &s->tris[t].v1, &s->tris[t].v2 };
@@ -1127,7 +1191,7 @@ static void ray_bin_lists_hold_every_triangle_a_ray_hits(void)
         ray_bins bins;
         ray_bin_outcome outcome;
         const ray_bin_limits limits = { .max_entries = 64u * n, .max_list = 1u << 20 };
-        CHECK(ray_bin_plan(&s->ctx->core, pass ? &scratch : NULL, rays, n, s->tris, tris, lo, hi, limits, 2, &bins,
+        CHECK(ray_bin_plan(&s->ctx->core, pass ? &scratch : NULL, rays, n, s->tris, tris, &box, limits, 2, &bins,
                            &outcome) == VKRT_OK);
         CHECK_MSG(outcome == RAY_BIN_BUILT, "%s: outcome %d", sets[set].what, (int)outcome);
         if (outcome != RAY_BIN_BUILT) continue;
@@ -2094,6 +2158,7 @@ int main(void)
     RUN(gpu_trace_rays_match_cpu_and_naive);
     RUN(gpu_trace_rays_answer_rays_missing_the_scene_box_on_the_host);
     RUN(ray_bin_lists_hold_every_triangle_a_ray_hits);
+    RUN(ray_bin_says_why_rays_do_not_suit);
     RUN(gpu_rays_sharing_an_origin_take_lists_with_the_bvh_hits);
     RUN(gpu_wide_traversal_matches_the_binary_one);
     RUN(gpu_wide_boxes_hold_rays_along_their_planes);
