@@ -101,6 +101,8 @@ struct ray_bin_job {
                                   tests those again */
     uint64_t cell_budget;      /* cells a triangle item may visit before the lists count as too long */
     bool *item_over;           /* a triangle item passed its budget */
+    uint64_t *range_sum;       /* per cell item: its cells' entries, then its first entry */
+    uint32_t *range_longest;   /* per cell item: its longest list */
     bool *item_behind;         /* a corner lay on or behind the origin's plane */
     uint32_t *entries;
 };
@@ -139,7 +141,9 @@ static void rays_project_item(void *job, uint32_t item)
          * (ray_cull.h; it turns away the rays that are not valid too): the grid spans them
          * alone, and the rays that miss the box (37% of the standard view's) take no cell. */
         const uint32_t lane = (i - item * RAY_ITEM) % 4;
-        if (lane == 0) {
+        if (lane == 0 && i + 4 <= end) {
+            enters = ray_cull_test4(r, j->box);
+        } else if (lane == 0) {
             vkrt_ray four[4];
             for (uint32_t k = 0; k < 4; k++) four[k] = j->rays[i + k < end ? i + k : i];
             enters = ray_cull_test4(four, j->box);
@@ -196,7 +200,8 @@ static void cells_bound_item(void *job, uint32_t item)
 {
     ray_bin_job *j = job;
     const uint32_t first = cell_item_first(j, item), end = cell_item_first(j, item + 1);
-    for (uint32_t c = first; c < end; c++) {
+    /* The last item clears the four cells past the grid as well. */
+    for (uint32_t c = first, clear = item == j->items - 1 ? end + 4 : end; c < clear; c++) {
         float *b = j->cell_bounds[c];
         b[0] = b[2] = INFINITY;
         b[1] = b[3] = -INFINITY;
@@ -210,6 +215,41 @@ static void cells_bound_item(void *job, uint32_t item)
         b[1] = x > b[1] ? x : b[1];
         b[2] = y < b[2] ? y : b[2];
         b[3] = y > b[3] ? y : b[3];
+    }
+}
+
+/* The scan's first half: the entries of the item's range of cells, and its longest list. */
+static void cells_sum_item(void *job, uint32_t item)
+{
+    ray_bin_job *j = job;
+    const uint32_t cells = j->g.gx * j->g.gy, first = cell_item_first(j, item), end = cell_item_first(j, item + 1);
+    uint64_t sum = 0;
+    uint32_t longest = 0;
+    for (uint32_t c = first; c < end; c++) {
+        uint64_t n = 0;
+        for (uint32_t i = 0; i < j->items; i++) n += j->counts[(size_t)i * cells + c];
+        sum += n;
+        longest = n > longest ? (n > UINT32_MAX ? UINT32_MAX : (uint32_t)n) : longest;
+    }
+    j->range_sum[item] = sum;
+    j->range_longest[item] = longest;
+}
+
+/* The scan's second half, once the totals passed the limits: each cell's first entry, and each
+ * triangle item's first position in it. */
+static void cells_place_item(void *job, uint32_t item)
+{
+    ray_bin_job *j = job;
+    const uint32_t cells = j->g.gx * j->g.gy, first = cell_item_first(j, item), end = cell_item_first(j, item + 1);
+    uint32_t at = (uint32_t)j->range_sum[item];
+    for (uint32_t c = first; c < end; c++) {
+        j->cell_start[c] = at;
+        for (uint32_t i = 0; i < j->items; i++) {
+            uint32_t *count = &j->counts[(size_t)i * cells + c];
+            const uint32_t n = *count;
+            *count = at;
+            at += n;
+        }
     }
 }
 
@@ -304,21 +344,36 @@ typedef struct tri_shape {
     uint32_t lane;
 } tri_shape;
 
-/* Whether the rays of a cell (bounds `cell`) may hit triangle t: the box of their projections
- * meets the triangle's, and no edge of it has the whole box outside. */
-static bool cell_may_hit(const float cell[4], tri_shape t)
+/* Which of the four cells at `cell` (consecutive in a row; the array runs on past the grid's
+ * last cell, empty) may hold rays that hit triangle t: bit k for cell[k]. a cell may where the
+ * box of its rays' projections meets the triangle's, and no edge of it has the whole box
+ * outside. Four cells at a time: a row of a span a mask at a time, without a branch a cell. */
+static unsigned cells_may_hit4(const float (*cell)[4], tri_shape t)
 {
     const projected4 *p = t.p;
     const uint32_t l = t.lane;
-    if (!((cell[0] <= p->box[1][l]) & (cell[1] >= p->box[0][l]) & (cell[2] <= p->box[3][l]) & (cell[3] >= p->box[2][l])))
-        return false;
-    if (!(p->edges >> l & 1)) return true;
-    for (int k = 0; k < 3; k++) {
-        const float nx = p->nx[k][l], ny = p->ny[k][l];
-        const float x = nx > 0.0f ? cell[1] : cell[0], y = ny > 0.0f ? cell[3] : cell[2];
-        if (!(nx * x + ny * y >= p->c[k][l])) return false;
-    }
-    return true;
+    float4 r[4] = { f4_load(cell[0]), f4_load(cell[1]), f4_load(cell[2]), f4_load(cell[3]) };
+    f4_transpose(r); /* a min, a max, b min, b max of the four cells */
+    float4 in = f4_and(f4_and(f4_le(r[0], f4_set1(p->box[1][l])), f4_ge(r[1], f4_set1(p->box[0][l]))),
+                       f4_and(f4_le(r[2], f4_set1(p->box[3][l])), f4_ge(r[3], f4_set1(p->box[2][l]))));
+    if (p->edges >> l & 1)
+        for (int k = 0; k < 3; k++) {
+            const float nx = p->nx[k][l], ny = p->ny[k][l];
+            const float4 x = nx > 0.0f ? r[1] : r[0], y = ny > 0.0f ? r[3] : r[2];
+            in = f4_and(in, f4_ge(f4_add(f4_mul(f4_set1(nx), x), f4_mul(f4_set1(ny), y)), f4_set1(p->c[k][l])));
+        }
+    return f4_bits(in);
+}
+
+/* The cells of row y, columns x0 .. x1 (at most 64), that may hold rays that hit t: bit
+ * x - x0. */
+static uint64_t row_may_hit(const ray_bin_job *j, tri_shape t, uint32_t y, uint32_t x0, uint32_t x1)
+{
+    uint64_t bits = 0;
+    const float (*row)[4] = j->cell_bounds + (size_t)y * j->g.gx;
+    for (uint32_t x = x0; x <= x1; x += 4) bits |= (uint64_t)cells_may_hit4(row + x, t) << (x - x0);
+    const uint32_t width = x1 - x0 + 1;
+    return width >= 64 ? bits : bits & ((1ull << width) - 1);
 }
 
 /* The lane's box. */
@@ -353,13 +408,11 @@ static bool count_triangle(ray_bin_job *j, uint32_t t, tri_shape shape, uint32_t
          * mesh many in one direction): the cells whose rays may hit noted for the fill (bit
          * width dy + dx), which then neither projects nor tests again. */
         uint64_t cells = 0;
-        for (uint32_t dy = 0, bit = 0; dy < height; dy++)
-            for (uint32_t dx = 0; dx < width; dx++, bit++) {
-                const uint32_t c = j->tri_cell[t] + dy * g->gx + dx;
-                const uint32_t in = cell_may_hit(j->cell_bounds[c], shape);
-                count[c] += in;
-                cells |= (uint64_t)in << bit;
-            }
+        for (uint32_t dy = 0; dy < height; dy++) {
+            uint64_t row = row_may_hit(j, shape, s.y0 + dy, s.x0, s.x1);
+            cells |= row << (dy * width);
+            for (uint32_t dx = 0; row; dx++, row >>= 1) count[j->tri_cell[t] + dy * g->gx + dx] += (uint32_t)(row & 1);
+        }
         j->tri_cells[t] = cells;
         j->tri_width[t] = (uint8_t)width;
         *visited += (uint64_t)width * height;
@@ -371,9 +424,10 @@ static bool count_triangle(ray_bin_job *j, uint32_t t, tri_shape shape, uint32_t
     *visited += (uint64_t)width * height;
     if (*visited > j->cell_budget) return false;
     for (uint32_t y = s.y0; y <= s.y1; y++)
-        for (uint32_t x = s.x0; x <= s.x1; x++) {
-            const uint32_t c = y * g->gx + x;
-            count[c] += cell_may_hit(j->cell_bounds[c], shape);
+        for (uint32_t x0 = s.x0; x0 <= s.x1; x0 += 64) {
+            const uint32_t x1 = s.x1 - x0 < 64 ? s.x1 : x0 + 63;
+            uint64_t row = row_may_hit(j, shape, y, x0, x1);
+            for (uint32_t x = x0; row; x++, row >>= 1) count[y * g->gx + x] += (uint32_t)(row & 1);
         }
     return true;
 }
@@ -427,9 +481,14 @@ static void tris_fill_item(void *job, uint32_t item)
         shape_box(shape, box);
         const cell_span s = span_of(g, box);
         for (uint32_t y = s.y0; y <= s.y1; y++)
-            for (uint32_t x = s.x0; x <= s.x1; x++) {
-                const uint32_t c = y * g->gx + x;
-                if (cell_may_hit(j->cell_bounds[c], shape)) j->entries[at[c]++] = t;
+            for (uint32_t x0 = s.x0; x0 <= s.x1; x0 += 64) {
+                const uint32_t x1 = s.x1 - x0 < 64 ? s.x1 : x0 + 63;
+                uint64_t row = row_may_hit(j, shape, y, x0, x1);
+                for (uint32_t x = x0; row; x++, row >>= 1)
+                    if (row & 1) {
+                        const uint32_t c = y * g->gx + x;
+                        j->entries[at[c]++] = t;
+                    }
             }
     }
 }
@@ -552,6 +611,8 @@ static void job_destroy(core *c, ray_bin_job *j)
     else ray_bin_scratch_destroy(c, j->scratch);
     core_free(c, j->item_over);
     core_free(c, j->item_behind);
+    core_free(c, j->range_sum);
+    core_free(c, j->range_longest);
     core_free(c, j);
 }
 
@@ -569,6 +630,8 @@ static ray_bin_outcome plan(core *c, ray_bin_job *j, ray_bin_limits limits, ray_
                 (j->ray_cell = scratch_array(c, m, ARRAY_RAY_CELL, j->ray_count, sizeof *j->ray_cell)) &&
                 (j->item_over = core_calloc_array(c, j->items, sizeof *j->item_over)) &&
                 (j->item_behind = core_calloc_array(c, j->items, sizeof *j->item_behind)) &&
+                (j->range_sum = core_calloc_array(c, j->items, sizeof *j->range_sum)) &&
+                (j->range_longest = core_calloc_array(c, j->items, sizeof *j->range_longest)) &&
                 (j->tri_cell = scratch_array(c, m, ARRAY_TRI_CELL, j->tri_count, sizeof *j->tri_cell)) &&
                 (j->tri_cells = scratch_array(c, m, ARRAY_TRI_CELLS, j->tri_count, sizeof *j->tri_cells)) &&
                 (j->tri_width = scratch_array(c, m, ARRAY_TRI_WIDTH, j->tri_count, sizeof *j->tri_width))))
@@ -589,7 +652,8 @@ static ray_bin_outcome plan(core *c, ray_bin_job *j, ray_bin_limits limits, ray_
     if (!valid) return RAY_BIN_NONE_ENTER;
     j->g = make_grid(bounds, valid);
     const uint32_t cells = j->g.gx * j->g.gy;
-    *ok = (j->cell_bounds = scratch_array(c, m, ARRAY_CELL_BOUNDS, cells, sizeof *j->cell_bounds)) &&
+    /* Four cells more than the grid's, empty: a row's last four-cell test reads past its end. */
+    *ok = (j->cell_bounds = scratch_array(c, m, ARRAY_CELL_BOUNDS, (size_t)cells + 4, sizeof *j->cell_bounds)) &&
           (j->cell_start = scratch_array(c, m, ARRAY_CELL_START, (size_t)cells + 1, sizeof *j->cell_start)) &&
           (j->counts = scratch_array(c, m, ARRAY_COUNTS, (size_t)cells * j->items, sizeof *j->counts));
     if (!*ok) return RAY_BIN_TOO_LONG;
@@ -603,21 +667,20 @@ static ray_bin_outcome plan(core *c, ray_bin_job *j, ray_bin_limits limits, ray_
         if (j->item_behind[i]) return RAY_BIN_BEHIND;
     for (uint32_t i = 0; i < j->items; i++)
         if (j->item_over[i]) return RAY_BIN_TOO_LONG;
+    /* The scan, in parallel: each item's range of cells summed, the ranges' starts, then each
+     * range's positions from its start. */
+    work_pool_run(j->pool, j->items, cells_sum_item, NULL, j);
     uint64_t total = 0;
     uint32_t longest = 0;
-    for (uint32_t cell = 0; cell < cells; cell++) {
-        const uint64_t first = total;
-        j->cell_start[cell] = (uint32_t)first;
-        for (uint32_t i = 0; i < j->items; i++) {
-            uint32_t *count = &j->counts[(size_t)i * cells + cell];
-            const uint32_t n = *count;
-            *count = (uint32_t)total;
-            total += n;
-        }
-        if (total - first > longest) longest = (uint32_t)(total - first);
-        /* Past the limit the positions no longer fit 32 bits: stop before they wrap. */
-        if (total > limits.max_entries || longest > limits.max_list) return RAY_BIN_TOO_LONG;
+    for (uint32_t i = 0; i < j->items; i++) {
+        const uint64_t sum = j->range_sum[i];
+        j->range_sum[i] = total;
+        total += sum;
+        if (j->range_longest[i] > longest) longest = j->range_longest[i];
     }
+    /* Past the limit the positions would no longer fit 32 bits. */
+    if (total > limits.max_entries || longest > limits.max_list) return RAY_BIN_TOO_LONG;
+    work_pool_run(j->pool, j->items, cells_place_item, NULL, j);
     j->cell_start[cells] = (uint32_t)total;
     *out = (ray_bins){ .ray_count = j->ray_count, .ray_cell = j->ray_cell, .cell_start = j->cell_start,
                        .entry_count = (uint32_t)total, .longest = longest };
