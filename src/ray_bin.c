@@ -175,8 +175,9 @@ static void rays_project_item(void *job, uint32_t item)
 static uint32_t cell_of(float x, float x0, float scale, uint32_t cells)
 {
     const float c = (x - x0) * scale;
-    /* Truncation is floor from 0 up. */
-    return c <= 0.0f ? 0 : c >= (float)(cells - 1) ? cells - 1 : (uint32_t)c;
+    /* Truncation is floor from 0 up. A NaN (a corner all but on the origin's plane can make
+     * infinities of a box) counts as 0, never as a conversion of NaN to an integer. */
+    return !(c > 0.0f) ? 0 : c >= (float)(cells - 1) ? cells - 1 : (uint32_t)c;
 }
 
 static void rays_cell_item(void *job, uint32_t item)
