@@ -129,43 +129,72 @@ static uint32_t ray_item_end(const ray_bin_job *j, uint32_t item)
     return end < j->ray_count ? (uint32_t)end : j->ray_count;
 }
 
+/* Four rays at a time in float4: the box test that keeps rays from the device (ray_cull.h; it
+ * turns away the rays that are not valid too), then for those that pass the origin check, the
+ * angle check and the projection. Float rounding of a projection is a few ulps of it, as of the
+ * triangles' corners: the widening's 64 hold both. */
 static void rays_project_item(void *job, uint32_t item)
 {
     ray_bin_job *j = job;
-    ray_item_result res = { .bounds = { INFINITY, -INFINITY, INFINITY, -INFINITY } };
-    unsigned enters = 0;
-    for (uint32_t i = item * RAY_ITEM, end = ray_item_end(j, item); i < end; i++) {
+    const frame *fr = &j->fr;
+    float4 lo_a = f4_set1(INFINITY), hi_a = f4_set1(-INFINITY), lo_b = lo_a, hi_b = hi_a;
+    ray_item_result res = { .valid = 0 };
+    const float4 min_cos2 = f4_set1((float)j->min_cos2), zero = f4_set1(0.0f);
+    for (uint32_t i = item * RAY_ITEM, end = ray_item_end(j, item); i < end; i += 4) {
+        const uint32_t lanes = end - i < 4 ? end - i : 4;
+        vkrt_ray tail[4];
         const vkrt_ray *r = &j->rays[i];
-        j->ray_ab[2 * i] = j->ray_ab[2 * i + 1] = NAN;
-        /* Only rays that may enter the scene's box, by the test that sends rays to the device
-         * (ray_cull.h; it turns away the rays that are not valid too): the grid spans them
-         * alone, and the rays that miss the box (37% of the standard view's) take no cell. */
-        const uint32_t lane = (i - item * RAY_ITEM) % 4;
-        if (lane == 0 && i + 4 <= end) {
-            enters = ray_cull_test4(r, j->box);
-        } else if (lane == 0) {
-            vkrt_ray four[4];
-            for (uint32_t k = 0; k < 4; k++) four[k] = j->rays[i + k < end ? i + k : i];
-            enters = ray_cull_test4(four, j->box);
+        if (lanes < 4) {
+            for (uint32_t k = 0; k < 4; k++) tail[k] = j->rays[k < lanes ? i + k : i];
+            r = tail;
         }
-        if (!(enters >> lane & 1)) continue;
-        res.origin_differs |= r->origin[0] != j->fr.o[0] || r->origin[1] != j->fr.o[1] || r->origin[2] != j->fr.o[2];
-        const double d[3] = { r->dir[0], r->dir[1], r->dir[2] };
-        const double z = dot(d, j->fr.f);
-        /* cos of the angle >= min_cos, squared: no square root. */
-        if (!(z > 0.0 && z * z >= j->min_cos2 * dot(d, d))) {
-            res.wide_angle = true;
-            continue;
+        /* Only rays that may enter the scene's box get a cell: the grid spans them alone, and the
+         * rays that miss the box (37% of the standard view's) take none. */
+        const unsigned enters = ray_cull_test4(r, j->box) & ((1u << lanes) - 1);
+        float4 rows[4];
+        for (uint32_t k = 0; k < 4; k++) {
+            rows[k] = f4_load(r[k].dir); /* x, y, z, tmax */
+            res.origin_differs |= (enters >> k & 1) && (r[k].origin[0] != fr->o[0] || r[k].origin[1] != fr->o[1] ||
+                                                         r[k].origin[2] != fr->o[2]);
         }
-        const double inv_z = 1.0 / z;
-        const float a = (float)(dot(d, j->fr.r) * inv_z), b = (float)(dot(d, j->fr.u) * inv_z);
-        j->ray_ab[2 * i] = a;
-        j->ray_ab[2 * i + 1] = b;
-        res.bounds[0] = min_d(res.bounds[0], a);
-        res.bounds[1] = max_d(res.bounds[1], a);
-        res.bounds[2] = min_d(res.bounds[2], b);
-        res.bounds[3] = max_d(res.bounds[3], b);
-        res.valid++;
+        f4_transpose(rows);
+        const float4 dx = rows[0], dy = rows[1], dz = rows[2];
+        const float4 z = f4_add(f4_add(f4_mul(dx, fr->f4[0]), f4_mul(dy, fr->f4[1])), f4_mul(dz, fr->f4[2]));
+        const float4 len2 = f4_add(f4_add(f4_mul(dx, dx), f4_mul(dy, dy)), f4_mul(dz, dz));
+        /* cos of the angle to the axis >= min_cos, squared: no square root. */
+        const unsigned near_axis = f4_bits(f4_and(f4_gt(z, zero), f4_ge(f4_mul(z, z), f4_mul(min_cos2, len2))));
+        res.wide_angle |= (enters & ~near_axis) != 0;
+        const unsigned keep = enters & near_axis;
+        const float4 inv_z = f4_div(f4_set1(1.0f), z);
+        const float4 a = f4_mul(f4_add(f4_add(f4_mul(dx, fr->r4[0]), f4_mul(dy, fr->r4[1])), f4_mul(dz, fr->r4[2])), inv_z);
+        const float4 b = f4_mul(f4_add(f4_add(f4_mul(dx, fr->u4[0]), f4_mul(dy, fr->u4[1])), f4_mul(dz, fr->u4[2])), inv_z);
+        const float4 kept = f4_mask(keep);
+        const float4 nan = f4_set1(NAN);
+        float av[4], bv[4];
+        f4_store(av, f4_select(kept, a, nan));
+        f4_store(bv, f4_select(kept, b, nan));
+        for (uint32_t k = 0; k < lanes; k++) {
+            j->ray_ab[2 * (i + k)] = av[k];
+            j->ray_ab[2 * (i + k) + 1] = bv[k];
+        }
+        lo_a = f4_min(lo_a, f4_select(kept, a, f4_set1(INFINITY)));
+        hi_a = f4_max(hi_a, f4_select(kept, a, f4_set1(-INFINITY)));
+        lo_b = f4_min(lo_b, f4_select(kept, b, f4_set1(INFINITY)));
+        hi_b = f4_max(hi_b, f4_select(kept, b, f4_set1(-INFINITY)));
+        res.valid += (uint32_t)__builtin_popcount(keep);
+    }
+    float lanes4[4][4];
+    f4_store(lanes4[0], lo_a);
+    f4_store(lanes4[1], hi_a);
+    f4_store(lanes4[2], lo_b);
+    f4_store(lanes4[3], hi_b);
+    res.bounds[0] = res.bounds[2] = INFINITY;
+    res.bounds[1] = res.bounds[3] = -INFINITY;
+    for (int k = 0; k < 4; k++) {
+        res.bounds[0] = min_d(res.bounds[0], lanes4[0][k]);
+        res.bounds[1] = max_d(res.bounds[1], lanes4[1][k]);
+        res.bounds[2] = min_d(res.bounds[2], lanes4[2][k]);
+        res.bounds[3] = max_d(res.bounds[3], lanes4[3][k]);
     }
     j->ray_results[item] = res;
 }
