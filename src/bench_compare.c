@@ -249,8 +249,9 @@ static void print_header(const compare *c)
     const vkrt_scene_stats *s = &c->stats[ENGINE_VKRT_CPU];
     fprintf(c->out, "vkrt bench --compare embree: %s (%llu triangles), %ux%u; Embree %s and vkrt's CPU backend (%s "
                     "code) on %u thread%s, GPU %s;\nmedian of %u timed call%s after a warm-up, wall-clock time of the whole call "
-                    "(on the GPU with the upload of the rays and the readback of the hits; device ms: the median of the same "
-                    "calls' device time, timestamps around the trace dispatches);\nprimary rays through the "
+                    "(on the GPU with the upload of the rays and the readback of the hits, and on a CPU device the host's "
+                    "triangle lists for rays that share an origin; device ms: the median of the same calls' device time, "
+                    "timestamps around the trace dispatches);\nprimary rays through the "
                     "pixel centres, then %d cosine-distributed AO rays per primary hit from vkrt_ray_offset origins, "
                     "up to distance %g\n\n",
             bench_scene_name(&c->source), (unsigned long long)s->triangles, c->width, c->height,
