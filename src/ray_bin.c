@@ -712,7 +712,7 @@ static ray_bin_outcome plan(core *c, ray_bin_job *j, ray_bin_limits limits, ray_
     if (total > limits.max_entries || longest > limits.max_list) return RAY_BIN_TOO_LONG;
     work_pool_run(j->pool, j->items, cells_place_item, NULL, j);
     j->cell_start[cells] = (uint32_t)total;
-    *out = (ray_bins){ .ray_count = j->ray_count, .ray_cell = j->ray_cell, .cell_start = j->cell_start,
+    *out = (ray_bins){ .ray_cell = j->ray_cell, .cell_start = j->cell_start,
                        .entry_count = (uint32_t)total, .longest = longest };
     return RAY_BIN_BUILT;
 }

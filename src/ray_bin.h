@@ -30,7 +30,6 @@
 typedef struct ray_bin_job ray_bin_job;
 
 typedef struct ray_bins {
-    uint32_t ray_count;
     const uint32_t *ray_cell;   /* each ray's cell (RAY_BIN_NO_CELL: none) */
     const uint32_t *cell_start; /* each cell's first entry, then one past the last cell's last */
     uint32_t entry_count;       /* all lists together */
