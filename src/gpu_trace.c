@@ -1337,8 +1337,12 @@ static vkrt_result ray_chunk_fill(ray_call *call, ray_chunk *c)
         if (call->cull) {
             /* Positions within a chunk are 32-bit: read at most 2^32 - 1 rays a chunk. */
             const size_t left = left_rays < UINT32_MAX ? left_rays : UINT32_MAX;
-            n = ray_cull_compact(call->rays + first, left, call->scene->node_count ? &call->scene->root : NULL, n,
-                                 c->o.rays.mapped, c->sent_index, call->out_hits + first, &read);
+            if (call->binned)
+                n = ray_bin_compact(&call->bins, call->rays + first, first, left, n, c->o.rays.mapped, c->sent_index,
+                                    call->out_hits + first, &read);
+            else
+                n = ray_cull_compact(call->rays + first, left, call->scene->node_count ? &call->scene->root : NULL, n,
+                                     c->o.rays.mapped, c->sent_index, call->out_hits + first, &read);
             call->next += read;
             call->culled += read - n;
             if (n == 0) continue;

@@ -7,7 +7,7 @@
  *   3. cells, an item a range of them: each cell's bounds of its rays' projections;
  *   4. triangles, four at a time: each one's projection, widened, and a count in every cell
  *      whose rays' bounds its box and edges may hold (each item its own counters: no atomics);
- *   - serially, the counts become each item's write positions;
+ *   - the counts become each item's write positions (a scan, each item a range of cells);
  * and ray_bin_fill:
  *   5. triangles: each entry written at its position, in the cells the count noted (a triangle
  *      over more than 64 cells projected and tested again).
@@ -17,6 +17,7 @@
 #include <math.h>
 #include <string.h>
 
+#include "cpu_trace.h"
 #include "float4.h"
 #include "ray_cull.h"
 #include "work_pool.h"
@@ -41,6 +42,9 @@ typedef struct grid {
     float a0, b0;    /* the rays' smallest projections */
     float sa, sb;    /* cells per unit */
     uint32_t gx, gy; /* cells across and down */
+    uint32_t stride; /* cells a row in memory: gx rounded up to a multiple of 4, the cells past
+                        gx empty, so that a row's cells come in aligned blocks of four */
+    uint32_t cells;  /* stride * gy */
 } grid;
 
 /* What one item of the ray pass found. */
@@ -90,7 +94,10 @@ struct ray_bin_job {
     ray_item_result *ray_results;
     float *ray_ab;             /* 2 a ray; NaN for a ray that gets no cell */
     uint32_t *ray_cell;
-    float (*cell_bounds)[4];   /* of its rays' projections; a min > a max where it has none */
+    /* Each cell's bounds of its rays' projections (min > max where it has none), in blocks of
+     * four cells: a min, a max, b min and b max of the four, so that a block is four loads from
+     * one cache line. */
+    float (*cell_block)[4][4];
     uint32_t *cell_start;      /* cells + 1 */
     uint32_t *counts;          /* per triangle item, a cell each: its count, then its write
                                   position (item i's at i * cells) */
@@ -216,35 +223,37 @@ static void rays_cell_item(void *job, uint32_t item)
     for (uint32_t i = item * RAY_ITEM, end = ray_item_end(j, item); i < end; i++) {
         const float a = j->ray_ab[2 * i], b = j->ray_ab[2 * i + 1];
         j->ray_cell[i] = isnan(a) ? RAY_BIN_NO_CELL
-                                  : cell_of(b, g->b0, g->sb, g->gy) * g->gx + cell_of(a, g->a0, g->sa, g->gx);
+                                  : cell_of(b, g->b0, g->sb, g->gy) * g->stride + cell_of(a, g->a0, g->sa, g->gx);
     }
 }
 
 static uint32_t cell_item_first(const ray_bin_job *j, uint32_t item)
 {
-    return (uint32_t)((uint64_t)j->g.gx * j->g.gy * item / j->items);
+    /* Whole blocks of four: an item clears and bounds its own (cells is a multiple of 4). */
+    return (uint32_t)((uint64_t)j->g.cells * item / j->items) & ~3u;
 }
 
-/* Each item owns a range of cells and reads every ray's cell: no two items write one cell. */
+/* Each item owns a range of whole blocks of cells and reads every ray's cell: no two items
+ * write one block. */
 static void cells_bound_item(void *job, uint32_t item)
 {
     ray_bin_job *j = job;
     const uint32_t first = cell_item_first(j, item), end = cell_item_first(j, item + 1);
-    /* The last item clears the four cells past the grid as well. */
-    for (uint32_t c = first, clear = item == j->items - 1 ? end + 4 : end; c < clear; c++) {
-        float *b = j->cell_bounds[c];
-        b[0] = b[2] = INFINITY;
-        b[1] = b[3] = -INFINITY;
-    }
+    for (uint32_t b = first / 4; b < end / 4; b++)
+        for (int k = 0; k < 4; k++) {
+            j->cell_block[b][0][k] = j->cell_block[b][2][k] = INFINITY;
+            j->cell_block[b][1][k] = j->cell_block[b][3][k] = -INFINITY;
+        }
     for (uint32_t i = 0; i < j->ray_count; i++) {
         const uint32_t c = j->ray_cell[i];
         if (c < first || c >= end) continue; /* RAY_BIN_NO_CELL too */
-        float *b = j->cell_bounds[c];
+        float(*b)[4] = j->cell_block[c / 4];
+        const uint32_t k = c % 4;
         const float x = j->ray_ab[2 * i], y = j->ray_ab[2 * i + 1];
-        b[0] = x < b[0] ? x : b[0];
-        b[1] = x > b[1] ? x : b[1];
-        b[2] = y < b[2] ? y : b[2];
-        b[3] = y > b[3] ? y : b[3];
+        b[0][k] = x < b[0][k] ? x : b[0][k];
+        b[1][k] = x > b[1][k] ? x : b[1][k];
+        b[2][k] = y < b[2][k] ? y : b[2][k];
+        b[3][k] = y > b[3][k] ? y : b[3][k];
     }
 }
 
@@ -252,7 +261,7 @@ static void cells_bound_item(void *job, uint32_t item)
 static void cells_sum_item(void *job, uint32_t item)
 {
     ray_bin_job *j = job;
-    const uint32_t cells = j->g.gx * j->g.gy, first = cell_item_first(j, item), end = cell_item_first(j, item + 1);
+    const uint32_t cells = j->g.cells, first = cell_item_first(j, item), end = cell_item_first(j, item + 1);
     uint64_t sum = 0;
     uint32_t longest = 0;
     for (uint32_t c = first; c < end; c++) {
@@ -270,7 +279,7 @@ static void cells_sum_item(void *job, uint32_t item)
 static void cells_place_item(void *job, uint32_t item)
 {
     ray_bin_job *j = job;
-    const uint32_t cells = j->g.gx * j->g.gy, first = cell_item_first(j, item), end = cell_item_first(j, item + 1);
+    const uint32_t cells = j->g.cells, first = cell_item_first(j, item), end = cell_item_first(j, item + 1);
     uint32_t at = (uint32_t)j->range_sum[item];
     for (uint32_t c = first; c < end; c++) {
         j->cell_start[c] = at;
@@ -283,16 +292,25 @@ static void cells_place_item(void *job, uint32_t item)
     }
 }
 
-/* Four projected triangles as the cells test them, a lane each: the widened box and, where a
- * triangle is wide enough for its orientation to be sure, its three edges moved outwards by
- * the widening and the rounding of these tests (inward normals n and offsets c: a point p may
- * lie in the triangle only where n . p >= c for all three). A detailed mesh's triangle covers
- * about half its box: the edges took 2.5 times fewer entries than boxes alone on the dragons. */
+/* Four projected triangles as the cells test them, a lane each: the widened box, the cells it
+ * spans and, where a triangle is wide enough for its orientation to be sure, its three edges
+ * moved outwards by the widening and the rounding of these tests (inward normals n and offsets
+ * c: a point p may lie in the triangle only where n . p >= c for all three; elsewhere n = 0 and
+ * c = -infinity, which every cell passes). A detailed mesh's triangle covers about half its
+ * box: the edges took 2.5 times fewer entries than boxes alone on the dragons. */
 typedef struct projected4 {
     float box[4][4];        /* a min, a max, b min, b max */
+    int32_t span[4][4];     /* the box's first and last column, first and last row */
     float nx[3][4], ny[3][4], c[3][4];
-    unsigned edges;         /* lanes whose edges apply */
 } projected4;
+
+/* The cell columns (or rows) of four projected coordinates, clamped to the grid: cell_of's, four
+ * at a time (MAXPS gives its second operand, 0, for a NaN). */
+static void cells_of4(float4 x, float x0, float scale, uint32_t cells, int32_t out[4])
+{
+    const float4 c = f4_mul(f4_sub(x, f4_set1(x0)), f4_set1(scale));
+    f4_truncate(f4_min(f4_max(c, f4_set1(0.0f)), f4_set1((float)(cells - 1))), out);
+}
 
 /* Triangles t .. t + 3 (a lane past `end` repeats triangle t) projected, widened (WIDEN_ULPS)
  * and given their edges, in float. Four at a time through float4: a triangle's three corners
@@ -333,10 +351,13 @@ static unsigned project_triangles(const ray_bin_job *j, uint32_t t, uint32_t end
     }
     const float4 widen =
         f4_mul(f4_mul(f4_set1((float)WIDEN_ULPS), f4_div(far, min_z)), f4_add(f4_set1(1.0f), max_tan2));
-    f4_store(out->box[0], f4_sub(lo_a, widen));
-    f4_store(out->box[1], f4_add(hi_a, widen));
-    f4_store(out->box[2], f4_sub(lo_b, widen));
-    f4_store(out->box[3], f4_add(hi_b, widen));
+    const float4 box[4] = { f4_sub(lo_a, widen), f4_add(hi_a, widen), f4_sub(lo_b, widen), f4_add(hi_b, widen) };
+    const grid *g = &j->g;
+    for (int k = 0; k < 4; k++) {
+        f4_store(out->box[k], box[k]);
+        if (k < 2) cells_of4(box[k], g->a0, g->sa, g->gx, out->span[k]);
+        else cells_of4(box[k], g->b0, g->sb, g->gy, out->span[k]);
+    }
     /* The edges. Distances within `tolerance` of the triangle count as inside: the widening,
      * and the rounding of the edge terms (a few ulps of the coordinates' size), with room. */
     float4 ex[3], ey[3], perimeter = f4_set1(0.0f), reach = f4_set1(1.0f);
@@ -350,15 +371,15 @@ static unsigned project_triangles(const ray_bin_job *j, uint32_t t, uint32_t end
     /* (P1 - P0) x (P2 - P0), twice the signed area; every height over four tolerances, so that
      * no rounding of the corners can turn the triangle over. */
     const float4 area2 = f4_sub(f4_mul(ey[0], ex[2]), f4_mul(ex[0], ey[2]));
-    out->edges = f4_bits(f4_gt(f4_abs(area2), f4_mul(f4_mul(f4_set1(4.0f), tolerance), perimeter)));
+    const float4 edges = f4_gt(f4_abs(area2), f4_mul(f4_mul(f4_set1(4.0f), tolerance), perimeter));
     const float4 side = f4_select(f4_gt(area2, f4_set1(0.0f)), f4_set1(1.0f), f4_set1(-1.0f));
     for (int k = 0; k < 3; k++) {
         const float4 nx = f4_mul(f4_sub(f4_set1(0.0f), ey[k]), side), ny = f4_mul(ex[k], side);
         const float4 c = f4_sub(f4_add(f4_mul(nx, pa[k]), f4_mul(ny, pb[k])),
                                 f4_mul(tolerance, f4_add(f4_abs(nx), f4_abs(ny))));
-        f4_store(out->nx[k], nx);
-        f4_store(out->ny[k], ny);
-        f4_store(out->c[k], c);
+        f4_store(out->nx[k], f4_and(edges, nx));
+        f4_store(out->ny[k], f4_and(edges, ny));
+        f4_store(out->c[k], f4_select(edges, c, f4_set1(-INFINITY)));
     }
     return ~f4_bits(front) & 15u;
 }
@@ -368,80 +389,77 @@ static uint32_t tri_item_first(const ray_bin_job *j, uint32_t item)
     return (uint32_t)((uint64_t)j->tri_count * item / j->items);
 }
 
-/* One lane of a projected4: the triangle the cells test. */
-typedef struct tri_shape {
-    const projected4 *p;
-    uint32_t lane;
-} tri_shape;
+/* One lane of a projected4, the triangle the cells test, in all four lanes; and its span. */
+typedef struct tri_test {
+    float4 box[4];
+    float4 nx[3], ny[3], c[3];
+    uint32_t x0, x1, y0, y1;
+} tri_test;
 
-/* Which of the four cells at `cell` (consecutive in a row; the array runs on past the grid's
- * last cell, empty) may hold rays that hit triangle t: bit k for cell[k]. a cell may where the
- * box of its rays' projections meets the triangle's, and no edge of it has the whole box
- * outside. Four cells at a time: a row of a span a mask at a time, without a branch a cell. */
-static unsigned cells_may_hit4(const float (*cell)[4], tri_shape t)
+static void tri_test_of(const projected4 *p, uint32_t lane, tri_test *t)
 {
-    const projected4 *p = t.p;
-    const uint32_t l = t.lane;
-    float4 r[4] = { f4_load(cell[0]), f4_load(cell[1]), f4_load(cell[2]), f4_load(cell[3]) };
-    f4_transpose(r); /* a min, a max, b min, b max of the four cells */
-    float4 in = f4_and(f4_and(f4_le(r[0], f4_set1(p->box[1][l])), f4_ge(r[1], f4_set1(p->box[0][l]))),
-                       f4_and(f4_le(r[2], f4_set1(p->box[3][l])), f4_ge(r[3], f4_set1(p->box[2][l]))));
-    if (p->edges >> l & 1)
-        for (int k = 0; k < 3; k++) {
-            const float nx = p->nx[k][l], ny = p->ny[k][l];
-            const float4 x = nx > 0.0f ? r[1] : r[0], y = ny > 0.0f ? r[3] : r[2];
-            in = f4_and(in, f4_ge(f4_add(f4_mul(f4_set1(nx), x), f4_mul(f4_set1(ny), y)), f4_set1(p->c[k][l])));
-        }
+    for (int k = 0; k < 4; k++) t->box[k] = f4_set1(p->box[k][lane]);
+    for (int k = 0; k < 3; k++) {
+        t->nx[k] = f4_set1(p->nx[k][lane]);
+        t->ny[k] = f4_set1(p->ny[k][lane]);
+        t->c[k] = f4_set1(p->c[k][lane]);
+    }
+    t->x0 = (uint32_t)p->span[0][lane];
+    t->x1 = (uint32_t)p->span[1][lane];
+    t->y0 = (uint32_t)p->span[2][lane];
+    t->y1 = (uint32_t)p->span[3][lane];
+}
+
+/* Which of the four cells of block `block` may hold rays that hit triangle t: bit k for its
+ * cell k. A cell may
+ * where the box of its rays' projections meets the triangle's, and no edge of it has the whole
+ * box outside: n . p is largest over the box at the corner whose coordinates n's signs pick,
+ * max(n.x a min, n.x a max) + max(n.y b min, n.y b max). Four cells at a time without a branch:
+ * a row of a span a mask at a time. */
+static unsigned cells_may_hit4(const ray_bin_job *j, size_t block, const tri_test *t)
+{
+    const float(*b)[4] = j->cell_block[block];
+    const float4 lo_a = f4_load(b[0]), hi_a = f4_load(b[1]), lo_b = f4_load(b[2]), hi_b = f4_load(b[3]);
+    float4 in = f4_and(f4_and(f4_le(lo_a, t->box[1]), f4_ge(hi_a, t->box[0])),
+                       f4_and(f4_le(lo_b, t->box[3]), f4_ge(hi_b, t->box[2])));
+    for (int k = 0; k < 3; k++) {
+        const float4 x = f4_max(f4_mul(t->nx[k], lo_a), f4_mul(t->nx[k], hi_a));
+        const float4 y = f4_max(f4_mul(t->ny[k], lo_b), f4_mul(t->ny[k], hi_b));
+        in = f4_and(in, f4_ge(f4_add(x, y), t->c[k]));
+    }
     return f4_bits(in);
 }
 
 /* The cells of row y, columns x0 .. x1 (at most 64), that may hold rays that hit t: bit
  * x - x0. */
-static uint64_t row_may_hit(const ray_bin_job *j, tri_shape t, uint32_t y, uint32_t x0, uint32_t x1)
+static uint64_t row_may_hit(const ray_bin_job *j, const tri_test *t, uint32_t y, uint32_t x0, uint32_t x1)
 {
-    uint64_t bits = 0;
-    const float (*row)[4] = j->cell_bounds + (size_t)y * j->g.gx;
-    for (uint32_t x = x0; x <= x1; x += 4) bits |= (uint64_t)cells_may_hit4(row + x, t) << (x - x0);
+    /* From the block that holds x0: its cells before x0 shifted out. */
+    const size_t row = (size_t)y * j->g.stride;
+    uint64_t bits = cells_may_hit4(j, (row + x0) / 4, t) >> (x0 % 4);
+    for (uint32_t x = (x0 | 3u) + 1; x <= x1; x += 4) bits |= (uint64_t)cells_may_hit4(j, (row + x) / 4, t) << (x - x0);
     const uint32_t width = x1 - x0 + 1;
     return width >= 64 ? bits : bits & ((1ull << width) - 1);
 }
 
-/* The lane's box. */
-static void shape_box(tri_shape t, float box[4])
-{
-    for (int k = 0; k < 4; k++) box[k] = t.p->box[k][t.lane];
-}
-
-/* The cells a box covers, columns x0 .. x1 and rows y0 .. y1. */
-typedef struct cell_span {
-    uint32_t x0, x1, y0, y1;
-} cell_span;
-
-static cell_span span_of(const grid *g, const float box[4])
-{
-    return (cell_span){ cell_of(box[0], g->a0, g->sa, g->gx), cell_of(box[1], g->a0, g->sa, g->gx),
-                        cell_of(box[2], g->b0, g->sb, g->gy), cell_of(box[3], g->b0, g->sb, g->gy) };
-}
-
-/* Counts triangle t (shape `shape`) into the cells whose rays may hit it; false where the item
+/* Counts triangle t (test `s`) into the cells whose rays may hit it; false where the item
  * passes its budget of cell visits. */
-static bool count_triangle(ray_bin_job *j, uint32_t t, tri_shape shape, uint32_t *count, uint64_t *visited)
+static bool count_triangle(ray_bin_job *j, uint32_t t, const tri_test *s, uint32_t *count, uint64_t *visited)
 {
     const grid *g = &j->g;
-    float box[4];
-    shape_box(shape, box);
-    const cell_span s = span_of(g, box);
-    const uint32_t width = s.x1 - s.x0 + 1, height = s.y1 - s.y0 + 1;
-    j->tri_cell[t] = s.y0 * g->gx + s.x0;
+    const uint32_t width = s->x1 - s->x0 + 1, height = s->y1 - s->y0 + 1;
+    const uint32_t first = s->y0 * g->stride + s->x0;
+    j->tri_cell[t] = first;
     if ((uint64_t)width * height <= 64) {
         /* A detailed mesh's triangles span up to 64 cells (the long thin ones of a decimated
          * mesh many in one direction): the cells whose rays may hit noted for the fill (bit
          * width dy + dx), which then neither projects nor tests again. */
         uint64_t cells = 0;
         for (uint32_t dy = 0; dy < height; dy++) {
-            uint64_t row = row_may_hit(j, shape, s.y0 + dy, s.x0, s.x1);
+            uint64_t row = row_may_hit(j, s, s->y0 + dy, s->x0, s->x1);
             cells |= row << (dy * width);
-            for (uint32_t dx = 0; row; dx++, row >>= 1) count[j->tri_cell[t] + dy * g->gx + dx] += (uint32_t)(row & 1);
+            uint32_t *row_count = count + first + dy * g->stride;
+            for (; row; row &= row - 1) row_count[__builtin_ctzll(row)]++;
         }
         j->tri_cells[t] = cells;
         j->tri_width[t] = (uint8_t)width;
@@ -453,11 +471,11 @@ static bool count_triangle(ray_bin_job *j, uint32_t t, tri_shape shape, uint32_t
      * no case for lists. */
     *visited += (uint64_t)width * height;
     if (*visited > j->cell_budget) return false;
-    for (uint32_t y = s.y0; y <= s.y1; y++)
-        for (uint32_t x0 = s.x0; x0 <= s.x1; x0 += 64) {
-            const uint32_t x1 = s.x1 - x0 < 64 ? s.x1 : x0 + 63;
-            uint64_t row = row_may_hit(j, shape, y, x0, x1);
-            for (uint32_t x = x0; row; x++, row >>= 1) count[y * g->gx + x] += (uint32_t)(row & 1);
+    for (uint32_t y = s->y0; y <= s->y1; y++)
+        for (uint32_t x0 = s->x0; x0 <= s->x1; x0 += 64) {
+            const uint32_t x1 = s->x1 - x0 < 64 ? s->x1 : x0 + 63;
+            uint32_t *row_count = count + (size_t)y * g->stride + x0;
+            for (uint64_t row = row_may_hit(j, s, y, x0, x1); row; row &= row - 1) row_count[__builtin_ctzll(row)]++;
         }
     return true;
 }
@@ -466,8 +484,8 @@ static void tris_count_item(void *job, uint32_t item)
 {
     ray_bin_job *j = job;
     const grid *g = &j->g;
-    uint32_t *count = j->counts + (size_t)item * g->gx * g->gy;
-    memset(count, 0, (size_t)g->gx * g->gy * sizeof *count);
+    uint32_t *count = j->counts + (size_t)item * g->cells;
+    memset(count, 0, (size_t)g->cells * sizeof *count);
     uint64_t visited = 0;
     const uint32_t first = tri_item_first(j, item), end = tri_item_first(j, item + 1);
     for (uint32_t t4 = first; t4 < end; t4 += 4) {
@@ -478,7 +496,9 @@ static void tris_count_item(void *job, uint32_t item)
             return;
         }
         for (uint32_t lane = 0; lane < lanes; lane++) {
-            if (!count_triangle(j, t4 + lane, (tri_shape){ &p, lane }, count, &visited)) {
+            tri_test s;
+            tri_test_of(&p, lane, &s);
+            if (!count_triangle(j, t4 + lane, &s, count, &visited)) {
                 j->item_over[item] = true;
                 return;
             }
@@ -490,35 +510,28 @@ static void tris_fill_item(void *job, uint32_t item)
 {
     ray_bin_job *j = job;
     const grid *g = &j->g;
-    uint32_t *at = j->counts + (size_t)item * g->gx * g->gy;
+    uint32_t *at = j->counts + (size_t)item * g->cells;
     for (uint32_t t = tri_item_first(j, item), end = tri_item_first(j, item + 1); t < end; t++) {
         const uint32_t width = j->tri_width[t];
         if (width) {
             /* The cells the count noted, in its order. */
-            uint64_t cells = j->tri_cells[t];
-            for (uint32_t bit = 0; cells; bit++, cells >>= 1)
-                if (cells & 1) {
-                    const uint32_t c = j->tri_cell[t] + bit / width * g->gx + bit % width;
-                    j->entries[at[c]++] = t;
-                }
+            for (uint64_t cells = j->tri_cells[t]; cells; cells &= cells - 1) {
+                const uint32_t bit = (uint32_t)__builtin_ctzll(cells);
+                j->entries[at[j->tri_cell[t] + bit / width * g->stride + bit % width]++] = t;
+            }
             continue;
         }
         /* Projected again: lane 0 of four copies of t, the same bits as its lane in the count. */
         projected4 p;
         project_triangles(j, t, t + 1, &p);
-        const tri_shape shape = { &p, 0 };
-        float box[4];
-        shape_box(shape, box);
-        const cell_span s = span_of(g, box);
+        tri_test s;
+        tri_test_of(&p, 0, &s);
         for (uint32_t y = s.y0; y <= s.y1; y++)
             for (uint32_t x0 = s.x0; x0 <= s.x1; x0 += 64) {
                 const uint32_t x1 = s.x1 - x0 < 64 ? s.x1 : x0 + 63;
-                uint64_t row = row_may_hit(j, shape, y, x0, x1);
-                for (uint32_t x = x0; row; x++, row >>= 1)
-                    if (row & 1) {
-                        const uint32_t c = y * g->gx + x;
-                        j->entries[at[c]++] = t;
-                    }
+                uint32_t *row_at = at + (size_t)y * g->stride + x0;
+                for (uint64_t row = row_may_hit(j, &s, y, x0, x1); row; row &= row - 1)
+                    j->entries[row_at[__builtin_ctzll(row)]++] = t;
             }
     }
 }
@@ -607,7 +620,9 @@ static grid make_grid(const double bounds[4], uint32_t rays)
         }
     }
     /* The largest projection maps past the last cell, where cell_of clamps it. */
-    return (grid){ .a0 = (float)bounds[0], .b0 = (float)bounds[2], .gx = gx, .gy = gy,
+    const uint32_t stride = (gx + 3) & ~3u;
+    return (grid){ .a0 = (float)bounds[0], .b0 = (float)bounds[2], .gx = gx, .gy = gy, .stride = stride,
+                   .cells = stride * gy,
                    .sa = wa > 0.0 ? (float)(gx / wa) : 0.0f, .sb = wb > 0.0 ? (float)(gy / wb) : 0.0f };
 }
 
@@ -681,9 +696,8 @@ static ray_bin_outcome plan(core *c, ray_bin_job *j, ray_bin_limits limits, ray_
     }
     if (!valid) return RAY_BIN_NONE_ENTER;
     j->g = make_grid(bounds, valid);
-    const uint32_t cells = j->g.gx * j->g.gy;
-    /* Four cells more than the grid's, empty: a row's last four-cell test reads past its end. */
-    *ok = (j->cell_bounds = scratch_array(c, m, ARRAY_CELL_BOUNDS, (size_t)cells + 4, sizeof *j->cell_bounds)) &&
+    const uint32_t cells = j->g.cells;
+    *ok = (j->cell_block = scratch_array(c, m, ARRAY_CELL_BOUNDS, cells / 4, sizeof *j->cell_block)) &&
           (j->cell_start = scratch_array(c, m, ARRAY_CELL_START, (size_t)cells + 1, sizeof *j->cell_start)) &&
           (j->counts = scratch_array(c, m, ARRAY_COUNTS, (size_t)cells * j->items, sizeof *j->counts));
     if (!*ok) return RAY_BIN_TOO_LONG;
@@ -768,6 +782,29 @@ void ray_bin_fill(ray_bins *b, uint32_t *entries)
     /* The pool's threads are idle from here on. */
     work_pool_destroy(j->pool);
     j->pool = NULL;
+}
+
+size_t ray_bin_compact(const ray_bins *b, const vkrt_ray *rays, size_t first, size_t count, size_t room,
+                       vkrt_ray *out_rays, uint32_t *out_index, vkrt_hit *out_hits, size_t *out_read)
+{
+    const vkrt_hit miss = cpu_trace_miss();
+    size_t copied = 0;
+    for (size_t i = 0; i < count; i++) {
+        uint32_t list[2];
+        ray_bin_list(b, (uint32_t)(first + i), list);
+        if (!list[1]) {
+            out_hits[i] = miss;
+            continue;
+        }
+        if (copied == room) {
+            *out_read = i;
+            return copied;
+        }
+        out_rays[copied] = rays[i];
+        out_index[copied++] = (uint32_t)i;
+    }
+    *out_read = count;
+    return copied;
 }
 
 void ray_bins_destroy(core *c, ray_bins *b)

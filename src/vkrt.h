@@ -526,11 +526,12 @@ typedef struct vkrt_trace_stats {
     uint64_t rays;            /* the call's rays */
     uint64_t rays_culled;     /* GPU backend on a CPU device (lavapipe), BVH traversal: rays that
                                  cannot enter the scene's box, answered on the host as misses
-                                 without reaching the device; 0 elsewhere */
+                                 without reaching the device (with rays_binned, those whose
+                                 triangle list is empty); 0 elsewhere */
     uint64_t rays_binned;     /* GPU backend on a CPU device, closest hits: rays that share one
                                  origin, traced through triangle lists built on the host instead
-                                 of the BVH (README, "Binned traversal"), with the same hits; 0
-                                 elsewhere */
+                                 of the BVH (README, "Binned traversal"), with the same hits: those
+                                 whose list is not empty, the rest culled; 0 elsewhere */
     uint32_t submissions;     /* GPU: device submissions the call took */
 } vkrt_trace_stats;
 
