@@ -536,18 +536,23 @@ static void tris_fill_item(void *job, uint32_t item)
     }
 }
 
-/* The first valid ray's origin, where the first few valid rays share it (the ray pass checks
- * them all: this turns most other sets away at once); else false. */
-static bool shared_origin(const vkrt_ray *rays, uint32_t count, double o[3])
+/* The origin of the first ray that may enter the scene's box, where the next such rays share it
+ * (the ray pass checks them all: this turns most other sets away at once); the first valid
+ * ray's where none of those checked may (the ray pass then finds whether any does). As the ray
+ * pass, it asks one origin only of rays that may enter the box. False where no ray is valid. */
+static bool shared_origin(const vkrt_ray *rays, uint32_t count, const vkrt_gpu_node *box, double o[3])
 {
-    const vkrt_ray *first = NULL;
+    const vkrt_ray *first = NULL, *first_valid = NULL;
     for (uint32_t i = 0, checked = 0; i < count && checked < 256; i++) {
         const vkrt_ray *r = &rays[i];
         if (!ray_valid(r)) continue;
+        if (!first_valid) first_valid = r;
+        if (!cpu_trace_ray_enters_box(r, box)) continue;
         if (!first) first = r;
         else if (memcmp(r->origin, first->origin, sizeof r->origin) != 0) return false;
         checked++;
     }
+    if (!first) first = first_valid;
     if (!first) return false;
     for (int k = 0; k < 3; k++) o[k] = first->origin[k];
     return true;
@@ -738,7 +743,7 @@ vkrt_result ray_bin_plan(core *c, ray_bin_scratch **keep, const vkrt_ray *rays, 
     memset(out, 0, sizeof *out);
     *out_outcome = RAY_BIN_ORIGINS_DIFFER;
     double origin[3];
-    if (!shared_origin(rays, ray_count, origin)) return VKRT_OK;
+    if (!shared_origin(rays, ray_count, box, origin)) return VKRT_OK;
     ray_bin_job *j = core_calloc_array(c, 1, sizeof *j);
     bool ok = j != NULL;
     if (ok) {

@@ -954,6 +954,24 @@ static void ray_bin_says_why_rays_do_not_suit(void)
           outcome == RAY_BIN_ORIGINS_DIFFER);
     ray_bins_destroy(&s->ctx->core, &bins);
     free(random);
+    /* One origin is asked only of rays that may enter the box: the default view's rays, the
+     * first 300 of them moved elsewhere and turned away from it, list as the view's, and those
+     * 300 get no list. */
+    CHECK(vkrt_camera_rays(cpu, NULL, w, h, rays, n) == VKRT_OK);
+    for (uint32_t i = 0; i < 300; i++) {
+        rays[i].origin[0] = rays[i].origin[1] = rays[i].origin[2] = 2.0f;
+        rays[i].dir[0] = 1.0f;
+        rays[i].dir[1] = rays[i].dir[2] = 0.0f;
+    }
+    CHECK(ray_bin_plan(&s->ctx->core, NULL, rays, n, s->tris, s->bvh.tri_count, &box, (ray_bin_limits){ 16u * n, 4096 },
+                       2, &bins, &outcome) == VKRT_OK);
+    CHECK_MSG(outcome == RAY_BIN_BUILT, "rays turned away from elsewhere first: outcome %d", (int)outcome);
+    if (outcome == RAY_BIN_BUILT) {
+        uint32_t listed = 0;
+        for (uint32_t i = 0; i < 300; i++) listed += bins.ray_cell[i] != RAY_BIN_NO_CELL;
+        CHECK_EQ_U64(listed, 0);
+    }
+    ray_bins_destroy(&s->ctx->core, &bins);
     free(rays);
     vkrt_scene_destroy(s);
 }
