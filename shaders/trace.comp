@@ -604,24 +604,36 @@ void finish_buffer_rays_wide()
     }
 }
 
-/* vkrt_trace_rays of rays that share one origin, on a CPU device (TRAVERSAL_BINNED): an
- * invocation a ray, which tests the triangles the host listed for it (src/ray_bin.h) with the
- * BVH's test and tie rule, so its closest hit is the wide traversal's; then does the wide
- * finish's work for its hit in place (the refined distance; a miss writes its triangle word
- * alone). Every list is short (ray_bin_limits), so no loop nears lavapipe's limit. */
+/* The binned traversal (TRAVERSAL_BINNED, a CPU device): the triangles the host listed for ray
+ * slot `index` (src/ray_bin.h), each tested with the BVH's test and tie rule, so the closest
+ * hit is the wide traversal's. Every list is short (ray_bin_limits), so no loop nears
+ * lavapipe's limit. */
+uvec2 ray_list(uint index)
+{
+    return uvec2(imageLoad(ray_lists, int(2u * index)).x, imageLoad(ray_lists, int(2u * index + 1u)).x);
+}
+
+/* Tests a ray's list: its first entry and its entry count. */
+void test_ray_list(ray r, uvec2 list, inout hit best)
+{
+    for (uint k = 0u; k < list.y; k++) {
+        uint tri_index = imageLoad(list_tris, int(list.x + k)).x;
+        bool last;
+        test_triangle_data(r, tri_index, load_wide_tri(tri_index, last), best);
+    }
+}
+
+/* vkrt_trace_rays of rays that share one origin, binned: an invocation a ray, which tests its
+ * list and then does the wide finish's work for its hit in place (the refined distance; a miss
+ * writes its triangle word alone). */
 void trace_buffer_ray_binned()
 {
     uint index = gl_WorkGroupID.x * VKRT_TRACE_GROUP_SIZE + gl_LocalInvocationIndex;
     if (index >= p.tile_width) return;
     ray r;
     load_wide_ray(index, r);
-    uvec2 list = uvec2(imageLoad(ray_lists, int(2u * index)).x, imageLoad(ray_lists, int(2u * index + 1u)).x);
     hit best = hit(r.tmax, 0.0, 0.0, NO_PRIM, NO_PRIM);
-    for (uint k = 0u; k < list.y; k++) {
-        uint tri_index = imageLoad(list_tris, int(list.x + k)).x;
-        bool last;
-        test_triangle_data(r, tri_index, load_wide_tri(tri_index, last), best);
-    }
+    test_ray_list(r, ray_list(index), best);
     if (best.prim == NO_PRIM) {
         imageStore(hit_words, int(4u * index + HIT_TRI_WORD), uvec4(NO_PRIM));
         return;
@@ -637,7 +649,7 @@ void trace_buffer_ray_binned()
 
 void main()
 {
-    if (TRAVERSAL == VKRT_GPU_TRAVERSAL_BINNED) {
+    if (TRAVERSAL == VKRT_GPU_TRAVERSAL_BINNED && RAYGEN != VKRT_GPU_RAYGEN_CAMERA) {
         trace_buffer_ray_binned();
         return;
     }
@@ -682,6 +694,18 @@ void main()
     }
 
     uint slot = local.y * p.tile_width + local.x;
+    if (TRAVERSAL == VKRT_GPU_TRAVERSAL_BINNED) {
+        /* A render's camera rays, binned: the host listed each pixel's triangles from the same
+         * rays (vkrt_camera_rays), slot by slot of the rectangle. A pixel with none (three in
+         * four of the standard view's) is a miss without its ray. */
+        uvec2 list = ray_list(slot);
+        if (list.y != 0u) {
+            test_ray_list(camera_ray(p, x, y), list, best);
+            finish_pixel_hit(x, y, best);
+        }
+        imageStore(out_image, ivec2(local), shade(best, heat));
+        return;
+    }
     if (already_finished(slot)) return;
     ray r = camera_ray(p, x, y);
     if (trace_scene(r, slot, best, heat)) {

@@ -619,7 +619,7 @@ vkrt_result vkrt_render(vkrt_context *ctx, vkrt_scene *scene, const vkrt_render_
             .camera = camera, .mode = mode, .traversal = traversal, .heat = heat, .intersector = d.intersector,
             .counters = d.traversal_counters, .alpha_tested = scene->alpha_tested,
             .textured = scene->texture_count > 0, .progress = d.progress,
-            .progress_user = d.progress_user,
+            .progress_user = d.progress_user, .tris = scene->tris, .threads = ctx->cpu_threads,
         };
         r = ensure_arrays(scene, gpu_trace_render_arrays(&scene->gpu, &p));
         if (r == VKRT_OK) r = gpu_trace_render(ctx->vk, &scene->gpu, &p, out_rgba, &trace_ms, &counts);
@@ -643,6 +643,7 @@ vkrt_result vkrt_render(vkrt_context *ctx, vkrt_scene *scene, const vkrt_render_
         out_stats->naive_by_cost = naive_by_cost;
         out_stats->submissions = counts.submissions;
         out_stats->longest_submission_ms = counts.longest_submission_ms;
+        out_stats->rays_binned = counts.rays_binned;
     }
     return r;
 }

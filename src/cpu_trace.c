@@ -169,8 +169,9 @@ vkrt_gpu_ray cpu_trace_camera_ray(const vkrt_gpu_push *camera, uint32_t x, uint3
 {
     camera_f cam = { v_load_f(camera->eye), v_load_f(camera->right), v_load_f(camera->up), v_load_f(camera->forward),
                      camera->width, camera->height };
-    ray_f r = camera_ray_f(&cam, x, y);
-    return (vkrt_gpu_ray){ { r.origin.x, r.origin.y, r.origin.z }, 0.0f, { r.dir.x, r.dir.y, r.dir.z }, 0.0f };
+    /* The direction alone: the traversal's set-up (six divisions) is not the ray's. */
+    const vec3_f dir = camera_dir_f(&cam, x, y);
+    return (vkrt_gpu_ray){ { cam.eye.x, cam.eye.y, cam.eye.z }, 0.0f, { dir.x, dir.y, dir.z }, 0.0f };
 }
 
 bool cpu_trace_one(const cpu_trace_scene *s, vkrt_traversal traversal, vkrt_intersector isect, const vkrt_gpu_ray *ray,

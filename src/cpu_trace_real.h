@@ -81,13 +81,18 @@ typedef struct R(camera) {
     uint32_t width, height;
 } R(camera);
 
-static R(ray) R(camera_ray)(const R(camera) *p, uint32_t x, uint32_t y)
+/* The unit direction of pixel (x, y)'s primary ray through its centre. */
+static R(vec3) R(camera_dir)(const R(camera) *p, uint32_t x, uint32_t y)
 {
     REAL sx = (REAL)2 * ((REAL)x + (REAL)0.5) / (REAL)p->width - (REAL)1;
     REAL sy = (REAL)1 - (REAL)2 * ((REAL)y + (REAL)0.5) / (REAL)p->height;
     R(vec3) d = R(v_add)(R(v_add)(p->forward, R(v_scale)(p->right, sx)), R(v_scale)(p->up, sy));
-    R(vec3) dir = R(v_scale)(d, (REAL)1 / REAL_SQRT(R(v_dot)(d, d)));
-    return R(ray_setup)(p->eye, dir, (REAL)0, REAL_INF);
+    return R(v_scale)(d, (REAL)1 / REAL_SQRT(R(v_dot)(d, d)));
+}
+
+static R(ray) R(camera_ray)(const R(camera) *p, uint32_t x, uint32_t y)
+{
+    return R(ray_setup)(p->eye, R(camera_dir)(p, x, y), (REAL)0, REAL_INF);
 }
 
 /* An arbitrary ray (vkrt_trace_rays); false for one that must miss: a non-finite origin or

@@ -1075,6 +1075,119 @@ static inline bool arrays_uploaded(const gpu_scene *scene, uint32_t arrays)
     return (!(arrays & GPU_ARRAY_NODES) || scene->nodes_uploaded) && (!(arrays & GPU_ARRAY_TRIS) || scene->tris_uploaded);
 }
 
+/* ---- the binned traversal's lists (src/ray_bin.h) ---- */
+
+/* The binned traversal's terms. Its lists are built on the host, which on a CPU device is what
+ * runs the traversal too: the full dragon's million camera rays took 45-55 ms to list and 20-29
+ * ms of device time to test, against 140-200 ms of device time through the wide BVH (README,
+ * "Binned traversal"). Listing costs every triangle's projection whatever the rays, so it needs
+ * enough rays for the scene's triangles (at a triangle a ray the full dragon's lists still pay:
+ * 0.83 there); a list's loop runs as long as the longest of a SIMD group's eight, and lavapipe
+ * ends loops silently after 65,535 turns. */
+#define GPU_BIN_MIN_RAYS 16384u
+#define GPU_BIN_MAX_RAYS (1u << 22)
+#define GPU_BIN_TRIS_PER_RAY 1u     /* at most this many triangles a ray */
+#define GPU_BIN_ENTRIES_PER_RAY 16u /* all lists together, at most */
+#define GPU_BIN_MAX_LIST 4096u
+
+/* Whether `count` rays (or pixels) of a scene may take the binned traversal: a CPU device, the
+ * wide arrays' triangles to list (`tris`, the scene's in BVH order), and rays enough for them.
+ * What the rays ask of the trace (closest hits, the watertight test, no alpha test) is the
+ * callers'. */
+static bool binning_suits(const vk_context *vk, const gpu_scene *scene, const vkrt_gpu_tri *tris, size_t count)
+{
+    return vk->properties.deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU && !vk->no_ray_binning && tris && scene->wide &&
+           scene->node_count && count >= GPU_BIN_MIN_RAYS && count <= GPU_BIN_MAX_RAYS &&
+           scene->tri_count <= (uint64_t)count * GPU_BIN_TRIS_PER_RAY;
+}
+
+/* A call's lists: the plan (each ray's first entry and count) and the entries on the device. */
+typedef struct binned_lists {
+    bool built;             /* the rays share one origin and their lists keep within the limits */
+    ray_bins bins;
+    vk_buffer tris;         /* the entries, triangle indices */
+    VkBufferView tri_words; /* its R32UI view */
+} binned_lists;
+
+/* Lists the triangles of `count` rays (those of `rays`, else the primary rays of `camera`,
+ * ray_bin_plan_camera) on the host and puts the lists on the device, where the rays share one
+ * origin and the lists keep within the limits; l->built says whether they did (else the BVH
+ * takes the rays). Fails only as the host or the device runs out of memory. */
+static vkrt_result binned_lists_build(vk_context *vk, const gpu_scene *scene, const vkrt_gpu_tri *tris,
+                                      uint32_t threads, const vkrt_ray *rays, const vkrt_gpu_push *camera,
+                                      size_t count, binned_lists *l)
+{
+    uint64_t max_entries = (uint64_t)count * GPU_BIN_ENTRIES_PER_RAY;
+    if (max_entries > vk->properties.limits.maxTexelBufferElements)
+        max_entries = vk->properties.limits.maxTexelBufferElements;
+    if (max_entries > UINT32_MAX) max_entries = UINT32_MAX;
+    const ray_bin_limits limits = { .max_entries = (uint32_t)max_entries, .max_list = GPU_BIN_MAX_LIST };
+    ray_bin_outcome outcome;
+    vkrt_result r = rays ? ray_bin_plan(vk->core, &vk->bin_scratch, rays, (uint32_t)count, tris, scene->tri_count,
+                                        &scene->root, limits, threads, &l->bins, &outcome)
+                         : ray_bin_plan_camera(vk->core, &vk->bin_scratch, camera, tris, scene->tri_count, &scene->root,
+                                               limits, threads, &l->bins, &outcome);
+    if (r != VKRT_OK || outcome != RAY_BIN_BUILT) return r;
+    const uint32_t entries = l->bins.entry_count;
+    const VkDeviceSize bytes = (VkDeviceSize)(entries ? entries : 1) * sizeof(uint32_t);
+    r = vk_buffer_create(vk, bytes, VK_BUFFER_USAGE_STORAGE_TEXEL_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT,
+                         VK_MEMORY_DEVICE, "vkrt triangle lists", &l->tris);
+    if (r == VKRT_OK && l->tris.mapped) {
+        /* Written where the device reads them (a CPU device's memory is the host's). */
+        ray_bin_fill(&l->bins, l->tris.mapped);
+        r = vk_buffer_flush(vk, &l->tris);
+    } else if (r == VKRT_OK) {
+        uint32_t *lists = core_alloc_array(vk->core, entries ? entries : 1, sizeof *lists);
+        if (!lists) r = core_fail(vk->core, VKRT_ERROR_OUT_OF_MEMORY, "out of memory for %u list entries", entries);
+        if (lists) {
+            ray_bin_fill(&l->bins, lists);
+            r = vk_buffer_upload(vk, &l->tris, lists, bytes);
+        }
+        core_free(vk->core, lists);
+    }
+    if (r == VKRT_OK) r = vk_buffer_view_create(vk, l->tris.buffer, l->tris.size, VK_FORMAT_R32_UINT, &l->tri_words);
+    l->built = r == VKRT_OK;
+    return r;
+}
+
+static void binned_lists_destroy(vk_context *vk, binned_lists *l)
+{
+    if (l->tri_words) vkDestroyBufferView(vk->device, l->tri_words, NULL);
+    vk_buffer_destroy(vk, &l->tris);
+    ray_bins_destroy(vk->core, &l->bins);
+    memset(l, 0, sizeof *l);
+}
+
+/* Whether a render may trace its camera rays through the binned traversal: closest hits shaded
+ * (the heat map and the counters show the BVH itself), through the wide BVH's arrays (whose
+ * triangles the lists index) with the watertight test and no alpha test, and binning_suits. */
+static bool render_binning_suits(const vk_context *vk, const gpu_scene *scene, const gpu_trace_params *params,
+                                 const vk_trace_variant *variant)
+{
+    return variant->wide && variant->traversal == VKRT_GPU_TRAVERSAL_BVH && !variant->counters &&
+           variant->mode != VKRT_GPU_MODE_HEATMAP && !params->alpha_tested &&
+           params->intersector != VKRT_INTERSECTOR_MOLLER_TRUMBORE &&
+           binning_suits(vk, scene, params->tris, (size_t)params->camera.width * params->camera.height);
+}
+
+/* The lists of the rectangle `push` names (tile_x, tile_y, tile_width x tile_height of an
+ * image `width` wide), slot by slot as the shader reads them, into o->ray_lists. */
+static vkrt_result rect_lists(vk_context *vk, render_objects *o, const ray_bins *bins, uint32_t width,
+                              const vkrt_gpu_push *push)
+{
+    const size_t n = (size_t)push->tile_width * push->tile_height;
+    uint32_t *words = o->ray_lists.mapped ? o->ray_lists.mapped : core_alloc_array(vk->core, n, 2 * sizeof *words);
+    if (!words) return core_fail(vk->core, VKRT_ERROR_OUT_OF_MEMORY, "out of memory for the lists of %zu pixels", n);
+    for (uint32_t row = 0; row < push->tile_height; row++)
+        for (uint32_t col = 0; col < push->tile_width; col++)
+            ray_bin_list(bins, (push->tile_y + row) * width + push->tile_x + col,
+                         words + 2 * ((size_t)row * push->tile_width + col));
+    if (o->ray_lists.mapped) return vk_buffer_flush(vk, &o->ray_lists);
+    const vkrt_result r = vk_buffer_upload(vk, &o->ray_lists, words, (VkDeviceSize)n * 2 * sizeof *words);
+    core_free(vk->core, words);
+    return r;
+}
+
 vkrt_result gpu_trace_render(vk_context *vk, const gpu_scene *scene, const gpu_trace_params *params,
                              float *out_rgba, double *out_device_ms, trace_counts *out_counts)
 {
@@ -1101,17 +1214,30 @@ vkrt_result gpu_trace_render(vk_context *vk, const gpu_scene *scene, const gpu_t
     /* Only heatmap reads the heat kind: other modes share one pipeline whatever it is. */
     if (variant.mode != VKRT_GPU_MODE_HEATMAP) variant.heat = VKRT_GPU_HEAT_NODES;
     variant.wide = render_is_wide(scene, params);
+    /* On a CPU device the camera rays may skip the BVH (README, "Binned traversal"). */
+    binned_lists lists = { 0 };
+    vkrt_result r = render_binning_suits(vk, scene, params, &variant)
+                        ? binned_lists_build(vk, scene, params->tris, params->threads, NULL, &params->camera,
+                                             (size_t)width * height, &lists)
+                        : VKRT_OK;
+    if (lists.built) {
+        variant.traversal = VKRT_GPU_TRAVERSAL_BINNED;
+        variant.budget = 0;
+    }
     vk_trace_pipeline pipe;
-    vkrt_result r = vk_trace_pipeline_get(vk, variant, &pipe);
-    if (r != VKRT_OK) return r;
+    if (r == VKRT_OK) r = vk_trace_pipeline_get(vk, variant, &pipe);
+    if (r != VKRT_OK) {
+        binned_lists_destroy(vk, &lists);
+        return r;
+    }
 
     const bool budget = variant.budget != 0;
     const uint32_t tile_w = width < TILE_SIZE ? width : TILE_SIZE;
     const uint32_t tile_h = height < TILE_SIZE ? height : TILE_SIZE;
     render_objects o;
     r = create_render_objects(vk, scene, pipe.set_layout, tile_w, tile_h, naive ? tile_w * tile_h : 1, 0,
-                              budget ? tile_w * tile_h : 0, variant.counters ? tile_w * tile_h : 0, 0, 0,
-                              VK_NULL_HANDLE, &o);
+                              budget ? tile_w * tile_h : 0, variant.counters ? tile_w * tile_h : 0, 0,
+                              lists.built ? tile_w * tile_h : 0, lists.built ? lists.tri_words : VK_NULL_HANDLE, &o);
     gpu_pacer pacer;
     pacer_for(vk, scene, naive, (uint64_t)tile_w * tile_h, &pacer);
     const uint32_t tiles_x = core_div_up(width, tile_w), tiles_y = core_div_up(height, tile_h);
@@ -1145,6 +1271,7 @@ vkrt_result gpu_trace_render(vk_context *vk, const gpu_scene *scene, const gpu_t
                                      .what = "render", .pacer = &pacer, .progress = params->progress,
                                      .progress_user = params->progress_user, .fraction = fraction };
             first = false;
+            if (lists.built && (r = rect_lists(vk, &o, &lists.bins, width, &push)) != VKRT_OK) break;
             if ((r = run_passes(vk, &o, &pass, push, out_device_ms, NULL)) != VKRT_OK) break;
             if (variant.counters && (r = add_tile_counts(vk, &o, rw * rh, out_counts)) != VKRT_OK) break;
             const float *src = o.readback.mapped;
@@ -1163,8 +1290,10 @@ vkrt_result gpu_trace_render(vk_context *vk, const gpu_scene *scene, const gpu_t
     if (r == VKRT_OK && params->counters && naive) out_counts->tris = (uint64_t)scene->tri_count * width * height;
     out_counts->submissions = pacer.submissions;
     out_counts->longest_submission_ms = pacer.longest_ms;
+    out_counts->rays_binned = lists.built ? (uint64_t)width * height : 0;
     if (r == VKRT_OK && params->progress) params->progress(params->progress_user, "trace", 1.0f);
     render_objects_destroy(vk, &o);
+    binned_lists_destroy(vk, &lists);
     return r;
 }
 
@@ -1261,10 +1390,7 @@ typedef struct ray_call {
     size_t count, next;     /* the call's rays; the first not yet read into a chunk */
     vkrt_hit *out_hits;
     bool naive, budget, cull;
-    bool binned;            /* through the lists of `bins` (ray_bin.h), in `list_tris` */
-    ray_bins bins;
-    vk_buffer list_tris;
-    VkBufferView list_tri_words;
+    binned_lists lists;     /* lists.built: through the binned traversal's lists */
     hits_way hits;
     uint32_t capacity, naive_chunks;
     gpu_pacer pacer;
@@ -1280,8 +1406,8 @@ static vkrt_result ray_chunk_create(ray_call *call, ray_chunk *c, bool readback)
     vkrt_result r = create_render_objects(
         vk, call->scene, call->pipe.set_layout, 1, 1, call->capacity, call->capacity,
         call->budget ? ray_resume_slots(call->scene, call->naive, call->capacity) : 0, 0,
-        call->binned ? 0 : ray_slot_words(call->scene, call->naive, call->capacity), call->binned ? call->capacity : 0,
-        call->binned ? call->list_tri_words : VK_NULL_HANDLE, &c->o);
+        call->lists.built ? 0 : ray_slot_words(call->scene, call->naive, call->capacity),
+        call->lists.built ? call->capacity : 0, call->lists.built ? call->lists.tri_words : VK_NULL_HANDLE, &c->o);
     c->created = true;
     if (r == VKRT_OK && readback) r = create_hit_readback(vk, &c->o, call->capacity);
     if (r == VKRT_OK && call->cull && !(c->sent_index = core_calloc_array(vk->core, call->capacity, sizeof *c->sent_index)))
@@ -1306,7 +1432,7 @@ static vkrt_result ray_chunk_lists(ray_call *call, ray_chunk *c, size_t first, u
     uint32_t *words = c->o.ray_lists.mapped ? c->o.ray_lists.mapped : core_alloc_array(vk->core, n, 2 * sizeof *words);
     if (!words) return core_fail(vk->core, VKRT_ERROR_OUT_OF_MEMORY, "out of memory for the lists of %u rays", n);
     for (uint32_t i = 0; i < n; i++)
-        ray_bin_list(&call->bins, (uint32_t)(first + (call->cull ? c->sent_index[i] : i)), words + 2 * i);
+        ray_bin_list(&call->lists.bins, (uint32_t)(first + (call->cull ? c->sent_index[i] : i)), words + 2 * i);
     if (c->o.ray_lists.mapped) return vk_buffer_flush(vk, &c->o.ray_lists);
     const vkrt_result r = vk_buffer_upload(vk, &c->o.ray_lists, words, (VkDeviceSize)n * 2 * sizeof *words);
     core_free(vk->core, words);
@@ -1337,8 +1463,8 @@ static vkrt_result ray_chunk_fill(ray_call *call, ray_chunk *c)
         if (call->cull) {
             /* Positions within a chunk are 32-bit: read at most 2^32 - 1 rays a chunk. */
             const size_t left = left_rays < UINT32_MAX ? left_rays : UINT32_MAX;
-            if (call->binned)
-                n = ray_bin_compact(&call->bins, call->rays + first, first, left, n, c->o.rays.mapped, c->sent_index,
+            if (call->lists.built)
+                n = ray_bin_compact(&call->lists.bins, call->rays + first, first, left, n, c->o.rays.mapped, c->sent_index,
                                     call->out_hits + first, &read);
             else
                 n = ray_cull_compact(call->rays + first, left, call->scene->node_count ? &call->scene->root : NULL, n,
@@ -1351,14 +1477,14 @@ static vkrt_result ray_chunk_fill(ray_call *call, ray_chunk *c)
             r = vk_buffer_upload(vk, &c->o.rays, call->rays + first, n * sizeof *call->rays);
             call->next += read;
         }
-        if (r == VKRT_OK && call->binned) r = ray_chunk_lists(call, c, first, (uint32_t)n);
+        if (r == VKRT_OK && call->lists.built) r = ray_chunk_lists(call, c, first, (uint32_t)n);
         if (r != VKRT_OK) return r;
         c->first = first;
         c->sent = (uint32_t)n;
         c->push = (vkrt_gpu_push){ .tile_width = (uint32_t)n, .tile_height = 1, .tri_end = call->scene->tri_count,
                                    .tri_total = call->scene->tri_count, .last_chunk = 1 };
         c->desc = (pass_desc){ .pipe = &call->pipe, .scene = call->scene, .naive = call->naive, .budget = call->budget,
-                               .binned = call->binned, .rays = true, .hits = call->hits, .first = !c->used, .what = "trace",
+                               .binned = call->lists.built, .rays = true, .hits = call->hits, .first = !c->used, .what = "trace",
                                .pacer = &call->pacer, .progress = call->params->progress,
                                .progress_user = call->params->progress_user, .fraction = fraction };
         return VKRT_OK;
@@ -1399,77 +1525,19 @@ static void ray_chunk_collect(ray_call *call, ray_chunk *c)
     c->sent = 0;
 }
 
-/* The binned traversal's terms (src/ray_bin.h). Its lists are built on the host, which on a CPU
- * device is what runs the traversal too: the full dragon's million camera rays took 45-65 ms to
- * list and 26-41 ms of device time to test, against 140-200 ms of device time through the wide
- * BVH (README, "Binned traversal"). Listing costs every triangle's projection whatever the rays,
- * so it needs enough rays for the scene's triangles (at a triangle a ray the full dragon's lists
- * still pay: 0.83 there); a list's loop runs as long as the longest of a SIMD group's eight, and
- * lavapipe ends loops silently after 65,535 turns. */
-#define GPU_BIN_MIN_RAYS 16384u
-#define GPU_BIN_MAX_RAYS (1u << 22)
-#define GPU_BIN_TRIS_PER_RAY 1u     /* at most this many triangles a ray */
-#define GPU_BIN_ENTRIES_PER_RAY 16u /* all lists together, at most */
-#define GPU_BIN_MAX_LIST 4096u
-
-/* Whether a call's rays may take the binned traversal: a CPU device, closest hits through the
- * BVH with the watertight test (whose rounding ray_bin.c's widening covers), no alpha test, the
- * wide arrays' triangles to list, and rays enough for the triangles. */
-static bool binning_suits(const vk_context *vk, const gpu_scene *scene, const gpu_trace_rays_params *params,
-                          size_t count)
+/* Whether a call's rays may take the binned traversal: besides binning_suits, closest hits
+ * through the BVH with the watertight test (whose rounding ray_bin.c's widening covers) and no
+ * alpha test. */
+static bool rays_binning_suit(const vk_context *vk, const gpu_scene *scene, const gpu_trace_rays_params *params,
+                              size_t count)
 {
-    return vk->properties.deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU && !vk->no_ray_binning && params->tris &&
-           params->traversal != VKRT_TRAVERSAL_NAIVE && !params->any_hit && !params->alpha_tested &&
-           params->intersector != VKRT_INTERSECTOR_MOLLER_TRUMBORE && scene->wide && scene->node_count &&
-           count >= GPU_BIN_MIN_RAYS && count <= GPU_BIN_MAX_RAYS &&
-           scene->tri_count <= (uint64_t)count * GPU_BIN_TRIS_PER_RAY;
-}
-
-/* Lists the call's rays' triangles on the host and puts the lists on the device, where the rays
- * share one origin and the lists keep within the limits; call->binned says whether they did. */
-static vkrt_result bin_rays(ray_call *call)
-{
-    vk_context *vk = call->vk;
-    const gpu_scene *scene = call->scene;
-    uint64_t max_entries = (uint64_t)call->count * GPU_BIN_ENTRIES_PER_RAY;
-    if (max_entries > vk->properties.limits.maxTexelBufferElements)
-        max_entries = vk->properties.limits.maxTexelBufferElements;
-    if (max_entries > UINT32_MAX) max_entries = UINT32_MAX;
-    const ray_bin_limits limits = { .max_entries = (uint32_t)max_entries, .max_list = GPU_BIN_MAX_LIST };
-    ray_bin_outcome outcome;
-    vkrt_result r = ray_bin_plan(vk->core, &vk->bin_scratch, call->rays, (uint32_t)call->count, call->params->tris,
-                                 scene->tri_count, &scene->root, limits, call->params->threads, &call->bins,
-                                 &outcome);
-    if (r != VKRT_OK || outcome != RAY_BIN_BUILT) return r;
-    const uint32_t entries = call->bins.entry_count;
-    const VkDeviceSize bytes = (VkDeviceSize)(entries ? entries : 1) * sizeof(uint32_t);
-    r = vk_buffer_create(vk, bytes, VK_BUFFER_USAGE_STORAGE_TEXEL_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT,
-                         VK_MEMORY_DEVICE, "vkrt triangle lists", &call->list_tris);
-    if (r == VKRT_OK && call->list_tris.mapped) {
-        /* Written where the device reads them (a CPU device's memory is the host's). */
-        ray_bin_fill(&call->bins, call->list_tris.mapped);
-        r = vk_buffer_flush(vk, &call->list_tris);
-    } else if (r == VKRT_OK) {
-        uint32_t *lists = core_alloc_array(vk->core, entries ? entries : 1, sizeof *lists);
-        if (!lists) r = core_fail(vk->core, VKRT_ERROR_OUT_OF_MEMORY, "out of memory for %u list entries", entries);
-        if (lists) {
-            ray_bin_fill(&call->bins, lists);
-            r = vk_buffer_upload(vk, &call->list_tris, lists, bytes);
-        }
-        core_free(vk->core, lists);
-    }
-    if (r == VKRT_OK)
-        r = vk_buffer_view_create(vk, call->list_tris.buffer, call->list_tris.size, VK_FORMAT_R32_UINT,
-                                  &call->list_tri_words);
-    call->binned = r == VKRT_OK;
-    return r;
+    return params->traversal != VKRT_TRAVERSAL_NAIVE && !params->any_hit && !params->alpha_tested &&
+           params->intersector != VKRT_INTERSECTOR_MOLLER_TRUMBORE && binning_suits(vk, scene, params->tris, count);
 }
 
 static void ray_call_destroy(ray_call *call)
 {
-    if (call->list_tri_words) vkDestroyBufferView(call->vk->device, call->list_tri_words, NULL);
-    vk_buffer_destroy(call->vk, &call->list_tris);
-    ray_bins_destroy(call->vk->core, &call->bins);
+    binned_lists_destroy(call->vk, &call->lists);
 }
 
 vkrt_result gpu_trace_rays(vk_context *vk, const gpu_scene *scene, const gpu_trace_rays_params *params,
@@ -1479,9 +1547,11 @@ vkrt_result gpu_trace_rays(vk_context *vk, const gpu_scene *scene, const gpu_tra
     assert(arrays_uploaded(scene, gpu_trace_rays_arrays(scene, params->traversal)));
     ray_call call = { .vk = vk, .scene = scene, .params = params, .rays = rays, .count = count, .out_hits = out_hits };
     call.naive = params->traversal == VKRT_TRAVERSAL_NAIVE;
-    vkrt_result r = binning_suits(vk, scene, params, count) ? bin_rays(&call) : VKRT_OK;
+    vkrt_result r = rays_binning_suit(vk, scene, params, count)
+                        ? binned_lists_build(vk, scene, params->tris, params->threads, rays, NULL, count, &call.lists)
+                        : VKRT_OK;
     vk_trace_variant variant = ray_variant(vk, scene, params, VKRT_GPU_RAYGEN_BUFFER);
-    if (call.binned) {
+    if (call.lists.built) {
         variant.traversal = VKRT_GPU_TRAVERSAL_BINNED;
         variant.budget = 0;
     }
@@ -1534,12 +1604,13 @@ vkrt_result gpu_trace_rays(vk_context *vk, const gpu_scene *scene, const gpu_tra
     if (r == VKRT_OK && params->progress) params->progress(params->progress_user, "trace", 1.0f);
     ray_chunk_destroy(vk, &chunks[0]);
     ray_chunk_destroy(vk, &chunks[1]);
+    const bool binned = call.lists.built; /* ray_call_destroy clears it */
     ray_call_destroy(&call);
     *out_device_ms = call.device_ms;
     *out_counts = (trace_counts){ .submissions = call.pacer.submissions,
                                   .longest_submission_ms = call.pacer.longest_ms,
                                   .rays_culled = call.culled,
-                                  .rays_binned = call.binned ? count - call.culled : 0 };
+                                  .rays_binned = binned ? count - call.culled : 0 };
     return r;
 }
 

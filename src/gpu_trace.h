@@ -103,6 +103,10 @@ typedef struct gpu_trace_params {
     bool textured;             /* some material has a texture (albedo, alpha test) */
     vkrt_progress_fn progress; /* may be NULL */
     void *progress_user;
+    const vkrt_gpu_tri *tris;  /* the scene's triangles in BVH order, whose lists the binned
+                                  traversal builds for the camera rays on a CPU device (NULL: the
+                                  BVH); see gpu_trace_rays_params */
+    uint32_t threads;          /* host threads that build them (0 counts as 1) */
 } gpu_trace_params;
 
 /* The binary arrays (GPU_ARRAY_*) gpu_trace_render reads for `params`; the caller uploads them

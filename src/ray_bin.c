@@ -82,7 +82,8 @@ struct ray_bin_job {
     work_pool *pool;
     ray_bin_scratch *scratch;
     ray_bin_scratch **keep;    /* where the scratch goes back (NULL: freed) */
-    const vkrt_ray *rays;
+    const vkrt_ray *rays;      /* NULL: the camera's */
+    const vkrt_gpu_push *camera;
     uint32_t ray_count;
     const vkrt_gpu_tri *tris;
     uint32_t tri_count;
@@ -130,6 +131,17 @@ static bool ray_valid(const vkrt_ray *r)
     return finite3(r->origin) && finite3(r->dir) && !(r->dir[0] == 0.0f && r->dir[1] == 0.0f && r->dir[2] == 0.0f);
 }
 
+/* Ray i of the plan: of the array, or the camera's through pixel (i % width, i / width), made
+ * as it is read (cpu_trace_camera_ray: the shader's own, bit for bit). */
+static vkrt_ray job_ray(const vkrt_ray *rays, const vkrt_gpu_push *camera, uint32_t i)
+{
+    if (rays) return rays[i];
+    const vkrt_gpu_ray g = cpu_trace_camera_ray(camera, i % camera->width, i / camera->width);
+    vkrt_ray r;
+    memcpy(&r, &g, sizeof r); /* one layout (api.c asserts it) */
+    return r;
+}
+
 static uint32_t ray_item_end(const ray_bin_job *j, uint32_t item)
 {
     const uint64_t end = (uint64_t)(item + 1) * RAY_ITEM;
@@ -150,9 +162,9 @@ static void rays_project_item(void *job, uint32_t item)
     for (uint32_t i = item * RAY_ITEM, end = ray_item_end(j, item); i < end; i += 4) {
         const uint32_t lanes = end - i < 4 ? end - i : 4;
         vkrt_ray tail[4];
-        const vkrt_ray *r = &j->rays[i];
-        if (lanes < 4) {
-            for (uint32_t k = 0; k < 4; k++) tail[k] = j->rays[k < lanes ? i + k : i];
+        const vkrt_ray *r = j->rays ? &j->rays[i] : tail;
+        if (lanes < 4 || !j->rays) {
+            for (uint32_t k = 0; k < 4; k++) tail[k] = job_ray(j->rays, j->camera, k < lanes ? i + k : i);
             r = tail;
         }
         /* Only rays that may enter the scene's box get a cell: the grid spans them alone, and the
@@ -540,34 +552,39 @@ static void tris_fill_item(void *job, uint32_t item)
  * (the ray pass checks them all: this turns most other sets away at once); the first valid
  * ray's where none of those checked may (the ray pass then finds whether any does). As the ray
  * pass, it asks one origin only of rays that may enter the box. False where no ray is valid. */
-static bool shared_origin(const vkrt_ray *rays, uint32_t count, const vkrt_gpu_node *box, double o[3])
+static bool shared_origin(const vkrt_ray *rays, const vkrt_gpu_push *camera, uint32_t count, const vkrt_gpu_node *box,
+                          double o[3])
 {
-    const vkrt_ray *first = NULL, *first_valid = NULL;
+    vkrt_ray first, first_valid;
+    bool found = false, found_valid = false;
     for (uint32_t i = 0, checked = 0; i < count && checked < 256; i++) {
-        const vkrt_ray *r = &rays[i];
-        if (!ray_valid(r)) continue;
-        if (!first_valid) first_valid = r;
-        if (!cpu_trace_ray_enters_box(r, box)) continue;
-        if (!first) first = r;
-        else if (memcmp(r->origin, first->origin, sizeof r->origin) != 0) return false;
+        const vkrt_ray r = job_ray(rays, camera, i);
+        if (!ray_valid(&r)) continue;
+        if (!found_valid) first_valid = r;
+        found_valid = true;
+        if (!cpu_trace_ray_enters_box(&r, box)) continue;
+        if (!found) first = r;
+        else if (memcmp(r.origin, first.origin, sizeof r.origin) != 0) return false;
+        found = true;
         checked++;
     }
-    if (!first) first = first_valid;
-    if (!first) return false;
-    for (int k = 0; k < 3; k++) o[k] = first->origin[k];
+    if (!found) first = first_valid;
+    if (!found && !found_valid) return false;
+    for (int k = 0; k < 3; k++) o[k] = first.origin[k];
     return true;
 }
 
 /* The axis f: the mean unit direction of up to RAY_BIN_AXIS_SAMPLES valid rays spread over the
  * set; r and u complete the frame, r from the world axis least along f. False where the
  * directions cancel out. */
-static bool make_frame(const vkrt_ray *rays, uint32_t count, frame *fr)
+static bool make_frame(const vkrt_ray *rays, const vkrt_gpu_push *camera, uint32_t count, frame *fr)
 {
     double sum[3] = { 0.0, 0.0, 0.0 };
     const uint32_t step = count / RAY_BIN_AXIS_SAMPLES + 1;
     for (uint32_t i = 0; i < count; i += step) {
-        if (!ray_valid(&rays[i])) continue;
-        const double d[3] = { rays[i].dir[0], rays[i].dir[1], rays[i].dir[2] };
+        const vkrt_ray r = job_ray(rays, camera, i);
+        if (!ray_valid(&r)) continue;
+        const double d[3] = { r.dir[0], r.dir[1], r.dir[2] };
         const double len = sqrt(dot(d, d));
         for (int k = 0; k < 3; k++) sum[k] += d[k] / len;
     }
@@ -669,7 +686,7 @@ static void job_destroy(core *c, ray_bin_job *j)
 /* The passes up to the lists' places (see the top of the file). */
 static ray_bin_outcome plan(core *c, ray_bin_job *j, ray_bin_limits limits, ray_bins *out, bool *ok)
 {
-    if (!make_frame(j->rays, j->ray_count, &j->fr)) return RAY_BIN_WIDE_ANGLE;
+    if (!make_frame(j->rays, j->camera, j->ray_count, &j->fr)) return RAY_BIN_WIDE_ANGLE;
     if (!box_in_front(&j->fr, j->box)) return RAY_BIN_BEHIND;
     const double min_cos = cos(RAY_BIN_MAX_ANGLE_DEG * (3.14159265358979323846 / 180.0));
     j->min_cos2 = min_cos * min_cos;
@@ -736,20 +753,20 @@ static ray_bin_outcome plan(core *c, ray_bin_job *j, ray_bin_limits limits, ray_
     return RAY_BIN_BUILT;
 }
 
-vkrt_result ray_bin_plan(core *c, ray_bin_scratch **keep, const vkrt_ray *rays, uint32_t ray_count,
-                         const vkrt_gpu_tri *tris, uint32_t tri_count, const vkrt_gpu_node *box,
-                         ray_bin_limits limits, uint32_t threads, ray_bins *out, ray_bin_outcome *out_outcome)
+/* ray_bin_plan and ray_bin_plan_camera: the rays of the array, else the camera's. */
+static vkrt_result plan_rays(core *c, ray_bin_scratch **keep, const vkrt_ray *rays, const vkrt_gpu_push *camera,
+                             uint32_t ray_count, const vkrt_gpu_tri *tris, uint32_t tri_count, const vkrt_gpu_node *box,
+                             ray_bin_limits limits, uint32_t threads, ray_bins *out, ray_bin_outcome *out_outcome)
 {
     memset(out, 0, sizeof *out);
     *out_outcome = RAY_BIN_ORIGINS_DIFFER;
     double origin[3];
-    if (!shared_origin(rays, ray_count, box, origin)) return VKRT_OK;
+    if (!shared_origin(rays, camera, ray_count, box, origin)) return VKRT_OK;
     ray_bin_job *j = core_calloc_array(c, 1, sizeof *j);
     bool ok = j != NULL;
     if (ok) {
-        *j = (ray_bin_job){
-            .rays = rays, .ray_count = ray_count, .tris = tris, .tri_count = tri_count, .box = box, .keep = keep
-        };
+        *j = (ray_bin_job){ .rays = rays, .camera = camera, .ray_count = ray_count, .tris = tris,
+                            .tri_count = tri_count, .box = box, .keep = keep };
         memcpy(j->fr.o, origin, sizeof origin);
         /* The kept scratch is this call's until ray_bins_destroy hands it back. */
         if (keep && *keep) {
@@ -777,6 +794,21 @@ vkrt_result ray_bin_plan(core *c, ray_bin_scratch **keep, const vkrt_ray *rays, 
     out->job = j;
     *out_outcome = RAY_BIN_BUILT;
     return VKRT_OK;
+}
+
+vkrt_result ray_bin_plan(core *c, ray_bin_scratch **keep, const vkrt_ray *rays, uint32_t ray_count,
+                         const vkrt_gpu_tri *tris, uint32_t tri_count, const vkrt_gpu_node *box,
+                         ray_bin_limits limits, uint32_t threads, ray_bins *out, ray_bin_outcome *out_outcome)
+{
+    return plan_rays(c, keep, rays, NULL, ray_count, tris, tri_count, box, limits, threads, out, out_outcome);
+}
+
+vkrt_result ray_bin_plan_camera(core *c, ray_bin_scratch **keep, const vkrt_gpu_push *camera,
+                                const vkrt_gpu_tri *tris, uint32_t tri_count, const vkrt_gpu_node *box,
+                                ray_bin_limits limits, uint32_t threads, ray_bins *out, ray_bin_outcome *out_outcome)
+{
+    return plan_rays(c, keep, NULL, camera, camera->width * camera->height, tris, tri_count, box, limits, threads,
+                     out, out_outcome);
 }
 
 void ray_bin_fill(ray_bins *b, uint32_t *entries)

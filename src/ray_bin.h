@@ -73,6 +73,13 @@ void ray_bin_scratch_destroy(core *c, ray_bin_scratch *s);
 vkrt_result ray_bin_plan(core *c, ray_bin_scratch **keep, const vkrt_ray *rays, uint32_t ray_count,
                          const vkrt_gpu_tri *tris, uint32_t tri_count, const vkrt_gpu_node *box,
                          ray_bin_limits limits, uint32_t threads, ray_bins *out, ray_bin_outcome *out_outcome);
+/* As ray_bin_plan for the primary rays of `camera` (its eye, basis and image size, as
+ * camera_setup fills them; width * height of at most 2^32 - 1) through every pixel centre, ray
+ * y * width + x pixel (x, y): cpu_trace_camera_ray's rays, which vkrt_camera_rays makes and the
+ * shaders' camera_ray traces, made as the plan reads them. The camera is borrowed for the plan. */
+vkrt_result ray_bin_plan_camera(core *c, ray_bin_scratch **keep, const vkrt_gpu_push *camera,
+                                const vkrt_gpu_tri *tris, uint32_t tri_count, const vkrt_gpu_node *box,
+                                ray_bin_limits limits, uint32_t threads, ray_bins *out, ray_bin_outcome *out_outcome);
 /* Writes the lists, b->entry_count triangle indices, into `entries`, each cell's in the
  * triangles' order. */
 void ray_bin_fill(ray_bins *b, uint32_t *entries);

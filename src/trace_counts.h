@@ -17,8 +17,9 @@ typedef struct trace_counts {
     double longest_submission_ms; /* GPU: wall-clock time of the longest */
     uint64_t rays_culled; /* vkrt_trace_rays on a CPU device: rays the host answered as missing
                              the scene's box */
-    uint64_t rays_binned; /* vkrt_trace_rays on a CPU device: rays traced through the lists of
-                             the binned traversal (src/ray_bin.h) */
+    uint64_t rays_binned; /* GPU backend on a CPU device: rays (vkrt_trace_rays) or camera rays
+                             (vkrt_render) traced through the lists of the binned traversal
+                             (src/ray_bin.h) */
 } trace_counts;
 
 #endif

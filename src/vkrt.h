@@ -482,6 +482,10 @@ typedef struct vkrt_render_stats {
     double longest_submission_ms; /* GPU: wall-clock time of the longest of them, from submission to
                                  its fence (the first use of a pipeline includes its compilation
                                  on drivers that compile at first dispatch, such as lavapipe) */
+    uint64_t rays_binned;     /* GPU backend on a CPU device, the modes that shade closest hits
+                                 (not the heat map, not with traversal_counters): camera rays
+                                 traced through triangle lists built on the host instead of the
+                                 BVH (README, "Binned traversal"), the same image; 0 elsewhere */
 } vkrt_render_stats;
 
 /* Floats vkrt_render() writes for an image of width x height: 4 per pixel (RGBA), rows top

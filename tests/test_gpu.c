@@ -1162,6 +1162,83 @@ static void gpu_rays_sharing_an_origin_take_lists_with_the_bvh_hits(void)
     free(rays);
 }
 
+/* Renders the view on the GPU where the binned traversal may take its camera rays and again
+ * kept to the BVH (the test knob): the images must agree in every bit. Returns the binned
+ * render's rays_binned. */
+static uint64_t render_binned_and_bvh(vkrt_scene *s, const vkrt_render_desc *d, const char *what)
+{
+    const size_t n = vkrt_render_floats(d->width, d->height);
+    float *a = malloc(n * sizeof *a), *b = malloc(n * sizeof *b);
+    vkrt_render_stats sa, sb;
+    vkrt_result ra = vkrt_render(gpu, s, d, a, n, &sa);
+    gpu->vk->no_ray_binning = true;
+    vkrt_result rb = vkrt_render(gpu, s, d, b, n, &sb);
+    gpu->vk->no_ray_binning = false;
+    CHECK_MSG(ra == VKRT_OK && rb == VKRT_OK, "%s: %s", what, vkrt_context_last_error(gpu));
+    size_t differ = 0, seen = 0;
+    for (size_t i = 0; ra == VKRT_OK && rb == VKRT_OK && i < n; i += 4) {
+        differ += memcmp(&a[i], &b[i], 4 * sizeof *a) != 0;
+        seen += memcmp(&b[i], &b[0], 4 * sizeof *b) != 0; /* not the corner's background */
+    }
+    fprintf(stderr, "  %s: %ux%u, %" PRIu64 " rays through lists, %zu of %zu pixels differ\n", what, d->width,
+            d->height, sa.rays_binned, differ, n / 4);
+    CHECK_MSG(differ == 0, "%s: %zu pixels differ from the BVH's image", what, differ);
+    CHECK_MSG(seen > 0, "%s: the image is one colour", what);
+    CHECK_MSG(sb.rays_binned == 0, "%s: the knob kept %" PRIu64 " rays binned", what, sb.rays_binned);
+    free(a);
+    free(b);
+    return sa.rays_binned;
+}
+
+/* vkrt_render's camera rays through the host's lists on a CPU device (README, "Binned
+ * traversal"): the same image as through the BVH in every mode that shades closest hits, over
+ * tiles and from views near and far; the heat map, the counters, naive traversal and an eye
+ * inside the box keep to the BVH. */
+static void gpu_renders_take_lists_with_the_bvh_image(void)
+{
+    if (gpu->vk->properties.deviceType != VK_PHYSICAL_DEVICE_TYPE_CPU) return; /* a GPU never bins */
+    vkrt_scene *s = make_scene(gpu, VKRT_MODELS_DIR "/meshes/dragon_11k.obj", VKRT_BVH_BUILDER_DEFAULT);
+    if (!s) return;
+    /* 520 x 40: three tiles across (TILE_SIZE 256), the mesh over the first two, 20,800 pixels
+     * for 11,102 triangles. */
+    const uint32_t w = 520, h = 40, pixels = w * h;
+    const vkrt_mode modes[] = { VKRT_MODE_NORMAL, VKRT_MODE_DEPTH, VKRT_MODE_ID, VKRT_MODE_ALBEDO, VKRT_MODE_UV };
+    const char *names[] = { "normal", "depth", "id", "albedo", "uv" };
+    for (size_t m = 0; m < sizeof modes / sizeof modes[0]; m++) {
+        const uint64_t binned = render_binned_and_bvh(s, &(vkrt_render_desc){ .width = w, .height = h, .mode = modes[m] },
+                                                      names[m]);
+        CHECK_MSG(binned == pixels, "%s: %" PRIu64 " of %u rays through lists", names[m], binned, pixels);
+    }
+    const vkrt_camera views[] = {
+        { .eye = { 0.9f, 0.4f, -0.8f }, .target = { 0.0f, 0.05f, 0.0f }, .fov_y_degrees = 30.0f },
+        /* close to the mesh: its box nearly reaches the eye's plane, lists long at the edges */
+        { .eye = { 0.1f, 0.0f, 0.62f }, .target = { 0.1f, 0.0f, 0.0f }, .fov_y_degrees = 100.0f },
+    };
+    for (size_t v = 0; v < sizeof views / sizeof views[0]; v++) {
+        const uint64_t binned = render_binned_and_bvh(
+            s, &(vkrt_render_desc){ .width = 160, .height = 120, .camera = views[v] }, v ? "close view" : "side view");
+        CHECK_MSG(binned == 160 * 120, "view %zu: %" PRIu64 " rays through lists", v, binned);
+    }
+    /* What keeps to the BVH: */
+    const struct {
+        vkrt_render_desc desc;
+        const char *what;
+    } keep_bvh[] = {
+        { { .width = w, .height = h, .mode = VKRT_MODE_HEATMAP }, "heat map" },
+        { { .width = w, .height = h, .traversal_counters = true }, "traversal counters" },
+        { { .width = w, .height = h, .traversal = VKRT_TRAVERSAL_NAIVE }, "naive traversal" },
+        { { .width = w, .height = h, .intersector = VKRT_INTERSECTOR_MOLLER_TRUMBORE }, "Moller-Trumbore" },
+        { { .width = w, .height = h, .camera = { .eye = { 0.0f, 0.0f, 0.1f }, .target = { 0.0f, 0.0f, -1.0f } } },
+          "an eye inside the box" },
+        { { .width = 100, .height = 100 }, "fewer pixels than triangles" },
+    };
+    for (size_t k = 0; k < sizeof keep_bvh / sizeof keep_bvh[0]; k++) {
+        const uint64_t binned = render_binned_and_bvh(s, &keep_bvh[k].desc, keep_bvh[k].what);
+        CHECK_MSG(binned == 0, "%s: %" PRIu64 " rays through lists", keep_bvh[k].what, binned);
+    }
+    vkrt_scene_destroy(s);
+}
+
 /* The host's lists themselves (src/ray_bin.h), on a scene's own triangles: every slot written,
  * each list in the triangles' order without repeats, and every triangle the watertight test
  * hits (brute force over all of them) in the list of each ray checked: camera rays, and rays
@@ -2183,6 +2260,7 @@ int main(void)
     RUN(ray_bin_lists_hold_every_triangle_a_ray_hits);
     RUN(ray_bin_says_why_rays_do_not_suit);
     RUN(gpu_rays_sharing_an_origin_take_lists_with_the_bvh_hits);
+    RUN(gpu_renders_take_lists_with_the_bvh_image);
     RUN(gpu_wide_traversal_matches_the_binary_one);
     RUN(gpu_wide_boxes_hold_rays_along_their_planes);
     RUN(gpu_deep_wide_bvhs_take_the_wide_traversal);
