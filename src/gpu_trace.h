@@ -114,8 +114,9 @@ typedef struct gpu_trace_params {
 uint32_t gpu_trace_render_arrays(const gpu_scene *scene, const gpu_trace_params *params);
 
 /* Writes width * height * 4 floats (rows top to bottom) to out_rgba; *out_device_ms gets the
- * summed device time of the trace dispatches (0 where the queue has no timestamps), and
- * *out_counts the traversal counters (zero unless params->counters). */
+ * summed device time of the trace dispatches (0 where the queue has no timestamps), with the
+ * binned traversal's listing on the host added where it took the camera rays, and *out_counts
+ * the traversal counters (zero unless params->counters). */
 vkrt_result gpu_trace_render(vk_context *vk, const gpu_scene *scene, const gpu_trace_params *params,
                              float *out_rgba, double *out_device_ms, trace_counts *out_counts);
 

@@ -457,8 +457,9 @@ typedef struct vkrt_render_desc {
 } vkrt_render_desc;
 
 typedef struct vkrt_render_stats {
-    double trace_ms;   /* GPU: device time of the trace dispatches (timestamp queries);
-                          CPU: wall-clock time of the tracing threads */
+    double trace_ms;   /* GPU: device time of the trace dispatches (timestamp queries), with
+                          the host's listing where the binned traversal took the camera rays
+                          (rays_binned); CPU: wall-clock time of the tracing threads */
     double total_ms;   /* wall-clock time of the whole call, upload and readback included */
     uint64_t rays;
     /* With vkrt_render_desc.traversal_counters (else 0), summed over every ray: BVH boxes
