@@ -6,6 +6,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "camera.h"
 #include "check.h"
 #include "context.h"
 #include "cpu_trace.h"
@@ -972,6 +973,56 @@ static void ray_bin_says_why_rays_do_not_suit(void)
         CHECK_EQ_U64(listed, 0);
     }
     ray_bins_destroy(&s->ctx->core, &bins);
+    free(rays);
+    vkrt_scene_destroy(s);
+}
+
+/* ray_bin_plan_camera, which makes a camera's rays as it reads them, lists exactly as
+ * ray_bin_plan does from the rays vkrt_camera_rays makes: the same cells, lists and entries. */
+static void ray_bin_camera_plan_lists_as_the_camera_rays_do(void)
+{
+    vkrt_scene *s = make_scene(cpu, VKRT_MODELS_DIR "/meshes/dragon_11k.obj", VKRT_BVH_BUILDER_DEFAULT);
+    if (!s) return;
+    const uint32_t w = 170, h = 110, n = w * h; /* not a multiple of 4 rays: the last lanes too */
+    const vkrt_gpu_node box = { .bmin = { -0.5f, -0.5f, -0.5f }, .bmax = { 0.5f, 0.5f, 0.5f } };
+    const ray_bin_limits limits = { 16u * n, 4096 };
+    const vkrt_camera views[] = {
+        { .fov_y_degrees = 0.0f },
+        { .eye = { 0.1f, 0.0f, 0.62f }, .target = { 0.1f, 0.0f, 0.0f }, .fov_y_degrees = 100.0f },
+    };
+    vkrt_ray *rays = malloc((size_t)n * sizeof *rays);
+    for (size_t v = 0; v < sizeof views / sizeof views[0]; v++) {
+        vkrt_gpu_push push = { 0 };
+        CHECK(camera_setup(&s->ctx->core, &views[v], w, h, &push) == VKRT_OK);
+        CHECK(vkrt_camera_rays(cpu, &views[v], w, h, rays, n) == VKRT_OK);
+        ray_bins a, b;
+        ray_bin_outcome oa, ob;
+        CHECK(ray_bin_plan(&s->ctx->core, NULL, rays, n, s->tris, s->bvh.tri_count, &box, limits, 2, &a, &oa) == VKRT_OK);
+        CHECK(ray_bin_plan_camera(&s->ctx->core, NULL, &push, s->tris, s->bvh.tri_count, &box, limits, 2, &b, &ob) ==
+              VKRT_OK);
+        CHECK_MSG(oa == RAY_BIN_BUILT && ob == RAY_BIN_BUILT, "view %zu: outcomes %d and %d", v, (int)oa, (int)ob);
+        if (oa == RAY_BIN_BUILT && ob == RAY_BIN_BUILT) {
+            size_t differ = 0;
+            for (uint32_t i = 0; i < n; i++) {
+                uint32_t la[2], lb[2];
+                ray_bin_list(&a, i, la);
+                ray_bin_list(&b, i, lb);
+                differ += la[0] != lb[0] || la[1] != lb[1];
+            }
+            uint32_t *ea = malloc(((size_t)a.entry_count + 1) * sizeof *ea), *eb = malloc(((size_t)b.entry_count + 1) * sizeof *eb);
+            ray_bin_fill(&a, ea);
+            ray_bin_fill(&b, eb);
+            const bool same_entries =
+                a.entry_count == b.entry_count && memcmp(ea, eb, (size_t)a.entry_count * sizeof *ea) == 0;
+            fprintf(stderr, "  view %zu: %u entries; %zu of %u rays' lists differ\n", v, a.entry_count, differ, n);
+            CHECK_MSG(differ == 0 && same_entries && a.entry_count > 0, "view %zu: %zu lists differ, entries %u and %u",
+                      v, differ, a.entry_count, b.entry_count);
+            free(ea);
+            free(eb);
+        }
+        ray_bins_destroy(&s->ctx->core, &a);
+        ray_bins_destroy(&s->ctx->core, &b);
+    }
     free(rays);
     vkrt_scene_destroy(s);
 }
@@ -2259,6 +2310,7 @@ int main(void)
     RUN(gpu_trace_rays_answer_rays_missing_the_scene_box_on_the_host);
     RUN(ray_bin_lists_hold_every_triangle_a_ray_hits);
     RUN(ray_bin_says_why_rays_do_not_suit);
+    RUN(ray_bin_camera_plan_lists_as_the_camera_rays_do);
     RUN(gpu_rays_sharing_an_origin_take_lists_with_the_bvh_hits);
     RUN(gpu_renders_take_lists_with_the_bvh_image);
     RUN(gpu_wide_traversal_matches_the_binary_one);
