@@ -16,7 +16,7 @@ typedef struct trace_counts {
     uint32_t submissions; /* GPU: device submissions (gpu_pace.h sizes them) */
     double longest_submission_ms; /* GPU: wall-clock time of the longest */
     uint64_t rays_culled; /* vkrt_trace_rays on a CPU device: rays the host answered as missing
-                             the scene's box */
+                             the scene's box (binned: those whose list is empty) */
     uint64_t rays_binned; /* GPU backend on a CPU device: rays (vkrt_trace_rays) or camera rays
                              (vkrt_render) traced through the lists of the binned traversal
                              (src/ray_bin.h) */
