@@ -1109,6 +1109,24 @@ typedef struct binned_lists {
     VkBufferView tri_words; /* its R32UI view */
 } binned_lists;
 
+/* Words the host writes for buffer b (a CPU device's memory is mapped: b's own, else a host
+ * array that host_words_end uploads); NULL, with the error set, when out of host memory. */
+static uint32_t *host_words_begin(vk_context *vk, vk_buffer *b, size_t words, const char *what)
+{
+    uint32_t *w = b->mapped ? b->mapped : core_alloc_array(vk->core, words ? words : 1, sizeof *w);
+    if (!w) core_fail(vk->core, VKRT_ERROR_OUT_OF_MEMORY, "out of memory for %s (%zu words)", what, words);
+    return w;
+}
+
+/* Puts the words host_words_begin handed out where the device reads them. */
+static vkrt_result host_words_end(vk_context *vk, vk_buffer *b, uint32_t *w, size_t words)
+{
+    if (b->mapped) return vk_buffer_flush(vk, b);
+    const vkrt_result r = vk_buffer_upload(vk, b, w, (VkDeviceSize)(words ? words : 1) * sizeof *w);
+    core_free(vk->core, w);
+    return r;
+}
+
 /* Lists the triangles of `count` rays (those of `rays`, else the primary rays of `camera`,
  * ray_bin_plan_camera) on the host and puts the lists on the device, where the rays share one
  * origin and the lists keep within the limits; l->built says whether they did (else the BVH
@@ -1129,21 +1147,15 @@ static vkrt_result binned_lists_build(vk_context *vk, const gpu_scene *scene, co
                                                limits, threads, &l->bins, &outcome);
     if (r != VKRT_OK || outcome != RAY_BIN_BUILT) return r;
     const uint32_t entries = l->bins.entry_count;
-    const VkDeviceSize bytes = (VkDeviceSize)(entries ? entries : 1) * sizeof(uint32_t);
-    r = vk_buffer_create(vk, bytes, VK_BUFFER_USAGE_STORAGE_TEXEL_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT,
-                         VK_MEMORY_DEVICE, "vkrt triangle lists", &l->tris);
-    if (r == VKRT_OK && l->tris.mapped) {
-        /* Written where the device reads them (a CPU device's memory is the host's). */
-        ray_bin_fill(&l->bins, l->tris.mapped);
-        r = vk_buffer_flush(vk, &l->tris);
-    } else if (r == VKRT_OK) {
-        uint32_t *lists = core_alloc_array(vk->core, entries ? entries : 1, sizeof *lists);
-        if (!lists) r = core_fail(vk->core, VKRT_ERROR_OUT_OF_MEMORY, "out of memory for %u list entries", entries);
-        if (lists) {
-            ray_bin_fill(&l->bins, lists);
-            r = vk_buffer_upload(vk, &l->tris, lists, bytes);
-        }
-        core_free(vk->core, lists);
+    r = vk_buffer_create(vk, (VkDeviceSize)(entries ? entries : 1) * sizeof(uint32_t),
+                         VK_BUFFER_USAGE_STORAGE_TEXEL_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT, VK_MEMORY_DEVICE,
+                         "vkrt triangle lists", &l->tris);
+    /* Written where the device reads them (a CPU device's memory is the host's). */
+    uint32_t *words = r == VKRT_OK ? host_words_begin(vk, &l->tris, entries, "list entries") : NULL;
+    if (r == VKRT_OK && !words) r = VKRT_ERROR_OUT_OF_MEMORY;
+    if (words) {
+        ray_bin_fill(&l->bins, words);
+        r = host_words_end(vk, &l->tris, words, entries);
     }
     if (r == VKRT_OK) r = vk_buffer_view_create(vk, l->tris.buffer, l->tris.size, VK_FORMAT_R32_UINT, &l->tri_words);
     l->built = r == VKRT_OK;
@@ -1176,16 +1188,13 @@ static vkrt_result rect_lists(vk_context *vk, render_objects *o, const ray_bins 
                               const vkrt_gpu_push *push)
 {
     const size_t n = (size_t)push->tile_width * push->tile_height;
-    uint32_t *words = o->ray_lists.mapped ? o->ray_lists.mapped : core_alloc_array(vk->core, n, 2 * sizeof *words);
-    if (!words) return core_fail(vk->core, VKRT_ERROR_OUT_OF_MEMORY, "out of memory for the lists of %zu pixels", n);
+    uint32_t *words = host_words_begin(vk, &o->ray_lists, 2 * n, "the pixels' lists");
+    if (!words) return VKRT_ERROR_OUT_OF_MEMORY;
     for (uint32_t row = 0; row < push->tile_height; row++)
         for (uint32_t col = 0; col < push->tile_width; col++)
             ray_bin_list(bins, (push->tile_y + row) * width + push->tile_x + col,
                          words + 2 * ((size_t)row * push->tile_width + col));
-    if (o->ray_lists.mapped) return vk_buffer_flush(vk, &o->ray_lists);
-    const vkrt_result r = vk_buffer_upload(vk, &o->ray_lists, words, (VkDeviceSize)n * 2 * sizeof *words);
-    core_free(vk->core, words);
-    return r;
+    return host_words_end(vk, &o->ray_lists, words, 2 * n);
 }
 
 vkrt_result gpu_trace_render(vk_context *vk, const gpu_scene *scene, const gpu_trace_params *params,
@@ -1431,15 +1440,11 @@ static void ray_chunk_destroy(vk_context *vk, ray_chunk *c)
  * position `first`, into its list buffer, in the order the rays were sent. */
 static vkrt_result ray_chunk_lists(ray_call *call, ray_chunk *c, size_t first, uint32_t n)
 {
-    vk_context *vk = call->vk;
-    uint32_t *words = c->o.ray_lists.mapped ? c->o.ray_lists.mapped : core_alloc_array(vk->core, n, 2 * sizeof *words);
-    if (!words) return core_fail(vk->core, VKRT_ERROR_OUT_OF_MEMORY, "out of memory for the lists of %u rays", n);
+    uint32_t *words = host_words_begin(call->vk, &c->o.ray_lists, 2 * (size_t)n, "the rays' lists");
+    if (!words) return VKRT_ERROR_OUT_OF_MEMORY;
     for (uint32_t i = 0; i < n; i++)
         ray_bin_list(&call->lists.bins, (uint32_t)(first + (call->cull ? c->sent_index[i] : i)), words + 2 * i);
-    if (c->o.ray_lists.mapped) return vk_buffer_flush(vk, &c->o.ray_lists);
-    const vkrt_result r = vk_buffer_upload(vk, &c->o.ray_lists, words, (VkDeviceSize)n * 2 * sizeof *words);
-    core_free(vk->core, words);
-    return r;
+    return host_words_end(call->vk, &c->o.ray_lists, words, 2 * (size_t)n);
 }
 
 /* Reads the call's next rays into chunk c, as many as the pacer allows and its buffers hold:
@@ -1607,13 +1612,12 @@ vkrt_result gpu_trace_rays(vk_context *vk, const gpu_scene *scene, const gpu_tra
     if (r == VKRT_OK && params->progress) params->progress(params->progress_user, "trace", 1.0f);
     ray_chunk_destroy(vk, &chunks[0]);
     ray_chunk_destroy(vk, &chunks[1]);
-    const bool binned = call.lists.built; /* ray_call_destroy clears it */
-    ray_call_destroy(&call);
     *out_device_ms = call.device_ms;
     *out_counts = (trace_counts){ .submissions = call.pacer.submissions,
                                   .longest_submission_ms = call.pacer.longest_ms,
                                   .rays_culled = call.culled,
-                                  .rays_binned = binned ? count - call.culled : 0 };
+                                  .rays_binned = call.lists.built ? count - call.culled : 0 };
+    ray_call_destroy(&call);
     return r;
 }
 
