@@ -644,6 +644,7 @@ vkrt_result vkrt_render(vkrt_context *ctx, vkrt_scene *scene, const vkrt_render_
         out_stats->submissions = counts.submissions;
         out_stats->longest_submission_ms = counts.longest_submission_ms;
         out_stats->rays_binned = counts.rays_binned;
+        out_stats->binned_tests = counts.binned_tests;
     }
     return r;
 }
@@ -718,6 +719,7 @@ vkrt_result vkrt_trace_rays(vkrt_context *ctx, vkrt_scene *scene, const vkrt_tra
         if (r == VKRT_OK) r = gpu_trace_rays(ctx->vk, &scene->gpu, &p, rays, count, out_hits, &stats.trace_ms, &counts);
         stats.rays_culled = counts.rays_culled;
         stats.rays_binned = counts.rays_binned;
+        stats.binned_tests = counts.binned_tests;
         stats.submissions = counts.submissions;
     } else {
         cpu_trace_scene s = cpu_scene_of(scene);

@@ -1109,6 +1109,14 @@ typedef struct binned_lists {
     VkBufferView tri_words; /* its R32UI view */
 } binned_lists;
 
+static void binned_lists_destroy(vk_context *vk, binned_lists *l)
+{
+    if (l->tri_words) vkDestroyBufferView(vk->device, l->tri_words, NULL);
+    vk_buffer_destroy(vk, &l->tris);
+    ray_bins_destroy(vk->core, &l->bins);
+    memset(l, 0, sizeof *l);
+}
+
 /* Words the host writes for buffer b (a CPU device's memory is mapped: b's own, else a host
  * array that host_words_end uploads); NULL, with the error set, when out of host memory. */
 static uint32_t *host_words_begin(vk_context *vk, vk_buffer *b, size_t words, const char *what)
@@ -1127,10 +1135,27 @@ static vkrt_result host_words_end(vk_context *vk, vk_buffer *b, uint32_t *w, siz
     return r;
 }
 
+/* The planned lists' entries, written into their buffer (a CPU device's memory is the host's:
+ * where the device reads them), and its R32UI view. */
+static vkrt_result binned_lists_upload(vk_context *vk, binned_lists *l)
+{
+    const uint32_t entries = l->bins.entry_count;
+    vkrt_result r = vk_buffer_create(vk, (VkDeviceSize)(entries ? entries : 1) * sizeof(uint32_t),
+                                     VK_BUFFER_USAGE_STORAGE_TEXEL_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT,
+                                     VK_MEMORY_DEVICE, "vkrt triangle lists", &l->tris);
+    if (r != VKRT_OK) return r;
+    uint32_t *words = host_words_begin(vk, &l->tris, entries, "list entries");
+    if (!words) return VKRT_ERROR_OUT_OF_MEMORY;
+    ray_bin_fill(&l->bins, words);
+    if ((r = host_words_end(vk, &l->tris, words, entries)) != VKRT_OK) return r;
+    return vk_buffer_view_create(vk, l->tris.buffer, l->tris.size, VK_FORMAT_R32_UINT, &l->tri_words);
+}
+
 /* Lists the triangles of `count` rays (those of `rays`, else the primary rays of `camera`,
  * ray_bin_plan_camera) on the host and puts the lists on the device, where the rays share one
- * origin and the lists keep within the limits; l->built says whether they did (else the BVH
- * takes the rays). Fails only as the host or the device runs out of memory. */
+ * origin, the lists keep within the limits and memory holds them; l->built says whether they
+ * did (else the BVH takes the rays). Fails only where the device does otherwise than by
+ * running out of memory. */
 static vkrt_result binned_lists_build(vk_context *vk, const gpu_scene *scene, const vkrt_gpu_tri *tris,
                                       uint32_t threads, const vkrt_ray *rays, const vkrt_gpu_push *camera,
                                       size_t count, binned_lists *l)
@@ -1145,29 +1170,18 @@ static vkrt_result binned_lists_build(vk_context *vk, const gpu_scene *scene, co
                                         &scene->root, limits, threads, &l->bins, &outcome)
                          : ray_bin_plan_camera(vk->core, &vk->bin_scratch, camera, tris, scene->tri_count, &scene->root,
                                                limits, threads, &l->bins, &outcome);
-    if (r != VKRT_OK || outcome != RAY_BIN_BUILT) return r;
-    const uint32_t entries = l->bins.entry_count;
-    r = vk_buffer_create(vk, (VkDeviceSize)(entries ? entries : 1) * sizeof(uint32_t),
-                         VK_BUFFER_USAGE_STORAGE_TEXEL_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT, VK_MEMORY_DEVICE,
-                         "vkrt triangle lists", &l->tris);
-    /* Written where the device reads them (a CPU device's memory is the host's). */
-    uint32_t *words = r == VKRT_OK ? host_words_begin(vk, &l->tris, entries, "list entries") : NULL;
-    if (r == VKRT_OK && !words) r = VKRT_ERROR_OUT_OF_MEMORY;
-    if (words) {
-        ray_bin_fill(&l->bins, words);
-        r = host_words_end(vk, &l->tris, words, entries);
+    if (r == VKRT_OK && outcome == RAY_BIN_BUILT) r = binned_lists_upload(vk, l);
+    l->built = r == VKRT_OK && outcome == RAY_BIN_BUILT;
+    if (r == VKRT_ERROR_OUT_OF_MEMORY || r == VKRT_ERROR_OUT_OF_DEVICE_MEMORY) {
+        /* The lists only save time: where the host or the device has no room for them, the
+         * BVH, which needs nothing more, takes the rays. */
+        core_log(vk->core, VKRT_LOG_WARN, "%s; the BVH traces these %zu rays instead of triangle lists",
+                 vk->core->last_error, count);
+        binned_lists_destroy(vk, l);
+        core_clear_error(vk->core);
+        r = VKRT_OK;
     }
-    if (r == VKRT_OK) r = vk_buffer_view_create(vk, l->tris.buffer, l->tris.size, VK_FORMAT_R32_UINT, &l->tri_words);
-    l->built = r == VKRT_OK;
     return r;
-}
-
-static void binned_lists_destroy(vk_context *vk, binned_lists *l)
-{
-    if (l->tri_words) vkDestroyBufferView(vk->device, l->tri_words, NULL);
-    vk_buffer_destroy(vk, &l->tris);
-    ray_bins_destroy(vk->core, &l->bins);
-    memset(l, 0, sizeof *l);
 }
 
 /* Whether a render may trace its camera rays through the binned traversal: closest hits shaded
@@ -1183,17 +1197,20 @@ static bool render_binning_suits(const vk_context *vk, const gpu_scene *scene, c
 }
 
 /* The lists of the rectangle `push` names (tile_x, tile_y, tile_width x tile_height of an
- * image `width` wide), slot by slot as the shader reads them, into o->ray_lists. */
+ * image `width` wide), slot by slot as the shader reads them, into o->ray_lists; their entries
+ * added to *tests. */
 static vkrt_result rect_lists(vk_context *vk, render_objects *o, const ray_bins *bins, uint32_t width,
-                              const vkrt_gpu_push *push)
+                              const vkrt_gpu_push *push, uint64_t *tests)
 {
     const size_t n = (size_t)push->tile_width * push->tile_height;
     uint32_t *words = host_words_begin(vk, &o->ray_lists, 2 * n, "the pixels' lists");
     if (!words) return VKRT_ERROR_OUT_OF_MEMORY;
     for (uint32_t row = 0; row < push->tile_height; row++)
-        for (uint32_t col = 0; col < push->tile_width; col++)
-            ray_bin_list(bins, (push->tile_y + row) * width + push->tile_x + col,
-                         words + 2 * ((size_t)row * push->tile_width + col));
+        for (uint32_t col = 0; col < push->tile_width; col++) {
+            uint32_t *list = words + 2 * ((size_t)row * push->tile_width + col);
+            ray_bin_list(bins, (push->tile_y + row) * width + push->tile_x + col, list);
+            *tests += list[1];
+        }
     return host_words_end(vk, &o->ray_lists, words, 2 * n);
 }
 
@@ -1283,7 +1300,8 @@ vkrt_result gpu_trace_render(vk_context *vk, const gpu_scene *scene, const gpu_t
                                      .what = "render", .pacer = &pacer, .progress = params->progress,
                                      .progress_user = params->progress_user, .fraction = fraction };
             first = false;
-            if (lists.built && (r = rect_lists(vk, &o, &lists.bins, width, &push)) != VKRT_OK) break;
+            if (lists.built && (r = rect_lists(vk, &o, &lists.bins, width, &push, &out_counts->binned_tests)) != VKRT_OK)
+                break;
             if ((r = run_passes(vk, &o, &pass, push, out_device_ms, NULL)) != VKRT_OK) break;
             if (variant.counters && (r = add_tile_counts(vk, &o, rw * rh, out_counts)) != VKRT_OK) break;
             const float *src = o.readback.mapped;
@@ -1408,6 +1426,7 @@ typedef struct ray_call {
     gpu_pacer pacer;
     double device_ms;       /* the passes' device time so far */
     uint64_t culled;        /* rays the host answered (call->cull) */
+    uint64_t binned_tests;  /* the entries of the lists sent */
 } ray_call;
 
 /* Makes chunk c's buffers, with a readback buffer for its hits where `readback` (the first
@@ -1442,8 +1461,10 @@ static vkrt_result ray_chunk_lists(ray_call *call, ray_chunk *c, size_t first, u
 {
     uint32_t *words = host_words_begin(call->vk, &c->o.ray_lists, 2 * (size_t)n, "the rays' lists");
     if (!words) return VKRT_ERROR_OUT_OF_MEMORY;
-    for (uint32_t i = 0; i < n; i++)
+    for (uint32_t i = 0; i < n; i++) {
         ray_bin_list(&call->lists.bins, (uint32_t)(first + (call->cull ? c->sent_index[i] : i)), words + 2 * i);
+        call->binned_tests += words[2 * i + 1];
+    }
     return host_words_end(call->vk, &c->o.ray_lists, words, 2 * (size_t)n);
 }
 
@@ -1616,7 +1637,8 @@ vkrt_result gpu_trace_rays(vk_context *vk, const gpu_scene *scene, const gpu_tra
     *out_counts = (trace_counts){ .submissions = call.pacer.submissions,
                                   .longest_submission_ms = call.pacer.longest_ms,
                                   .rays_culled = call.culled,
-                                  .rays_binned = call.lists.built ? count - call.culled : 0 };
+                                  .rays_binned = call.lists.built ? count - call.culled : 0,
+                                  .binned_tests = call.binned_tests };
     ray_call_destroy(&call);
     return r;
 }

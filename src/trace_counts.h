@@ -20,6 +20,7 @@ typedef struct trace_counts {
     uint64_t rays_binned; /* GPU backend on a CPU device: rays (vkrt_trace_rays) or camera rays
                              (vkrt_render) traced through the lists of the binned traversal
                              (src/ray_bin.h) */
+    uint64_t binned_tests; /* of those rays' lists, the entries: a triangle test each, and no box */
 } trace_counts;
 
 #endif

@@ -487,6 +487,8 @@ typedef struct vkrt_render_stats {
                                  (not the heat map, not with traversal_counters): camera rays
                                  traced through triangle lists built on the host instead of the
                                  BVH (README, "Binned traversal"), the same image; 0 elsewhere */
+    uint64_t binned_tests;    /* with rays_binned: the entries of those rays' lists summed, a
+                                 ray-triangle test each (the binned traversal tests no box) */
 } vkrt_render_stats;
 
 /* Floats vkrt_render() writes for an image of width x height: 4 per pixel (RGBA), rows top
@@ -537,6 +539,8 @@ typedef struct vkrt_trace_stats {
                                  origin, traced through triangle lists built on the host instead
                                  of the BVH (README, "Binned traversal"), with the same hits: those
                                  whose list is not empty, the rest culled; 0 elsewhere */
+    uint64_t binned_tests;    /* with rays_binned: the entries of those rays' lists summed, a
+                                 ray-triangle test each (the binned traversal tests no box) */
     uint32_t submissions;     /* GPU: device submissions the call took */
 } vkrt_trace_stats;
 

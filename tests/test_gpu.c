@@ -1027,6 +1027,26 @@ static void ray_bin_camera_plan_lists_as_the_camera_rays_do(void)
     vkrt_scene_destroy(s);
 }
 
+/* The entries of the lists ray_bin_plan makes for n rays over the GPU scene s: the triangle
+ * tests the binned traversal makes for them (vkrt_trace_stats.binned_tests). */
+static uint64_t planned_tests(vkrt_scene *s, const vkrt_ray *rays, uint32_t n)
+{
+    ray_bins bins;
+    ray_bin_outcome outcome;
+    const ray_bin_limits limits = { .max_entries = UINT32_MAX, .max_list = UINT32_MAX };
+    vkrt_result r = ray_bin_plan(&s->ctx->core, NULL, rays, n, s->tris, s->gpu.tri_count, &s->gpu.root, limits, 2, &bins,
+                                 &outcome);
+    CHECK_MSG(r == VKRT_OK && outcome == RAY_BIN_BUILT, "the plan: %s, outcome %d", vkrt_result_string(r), (int)outcome);
+    uint64_t tests = 0;
+    for (uint32_t i = 0; r == VKRT_OK && outcome == RAY_BIN_BUILT && i < n; i++) {
+        uint32_t list[2];
+        ray_bin_list(&bins, i, list);
+        tests += list[1];
+    }
+    ray_bins_destroy(&s->ctx->core, &bins);
+    return tests;
+}
+
 /* Traces rays on the GPU where the binned traversal may take them and again kept to the BVH (the
  * test knob), and counts the rays whose hits differ in any bit; *out_stats gets the first
  * call's statistics. */
@@ -1068,10 +1088,16 @@ static void check_binned(vkrt_scene *s, const vkrt_trace_desc *desc, const vkrt_
     CHECK_MSG(hits > 0, "%s: no ray hits", what);
     /* Every ray with a list that is not empty goes through the lists, the others answered on the
      * host as misses (so every ray that hits went through them), or none. */
-    if (listed)
+    if (listed) {
         CHECK_MSG(st.rays_binned >= hits && st.rays_binned + st.rays_culled == n,
                   "%s: %" PRIu64 " of %zu rays through lists, %zu hits", what, st.rays_binned, n, hits);
-    else CHECK_MSG(st.rays_binned == 0, "%s: %" PRIu64 " rays through lists", what, st.rays_binned);
+        const uint64_t tests = planned_tests(s, rays, (uint32_t)n);
+        CHECK_MSG(st.binned_tests == tests && tests >= hits, "%s: %" PRIu64 " tests counted, the lists hold %" PRIu64,
+                  what, st.binned_tests, tests);
+    } else {
+        CHECK_MSG(st.rays_binned == 0 && st.binned_tests == 0, "%s: %" PRIu64 " rays through lists", what,
+                  st.rays_binned);
+    }
 }
 
 /* Rays from `eye` at every corner and edge midpoint of triangles (positions `pos`, 9 floats a
@@ -1235,7 +1261,20 @@ static uint64_t render_binned_and_bvh(vkrt_scene *s, const vkrt_render_desc *d, 
             d->height, sa.rays_binned, differ, n / 4);
     CHECK_MSG(differ == 0, "%s: %zu pixels differ from the BVH's image", what, differ);
     CHECK_MSG(seen > 0, "%s: the image is one colour", what);
-    CHECK_MSG(sb.rays_binned == 0, "%s: the knob kept %" PRIu64 " rays binned", what, sb.rays_binned);
+    CHECK_MSG(sb.rays_binned == 0 && sb.binned_tests == 0, "%s: the knob kept %" PRIu64 " rays binned", what,
+              sb.rays_binned);
+    if (sa.rays_binned) {
+        /* Every pixel's list tested: the entries of the camera rays' lists. */
+        const uint32_t pixels = d->width * d->height;
+        vkrt_ray *rays = malloc((size_t)pixels * sizeof *rays);
+        CHECK(vkrt_camera_rays(gpu, &d->camera, d->width, d->height, rays, pixels) == VKRT_OK);
+        const uint64_t tests = planned_tests(s, rays, pixels);
+        CHECK_MSG(sa.binned_tests == tests && tests > 0, "%s: %" PRIu64 " tests counted, the lists hold %" PRIu64,
+                  what, sa.binned_tests, tests);
+        free(rays);
+    } else {
+        CHECK_MSG(sa.binned_tests == 0, "%s: %" PRIu64 " tests counted without lists", what, sa.binned_tests);
+    }
     free(a);
     free(b);
     return sa.rays_binned;

@@ -1078,6 +1078,103 @@ static void every_failed_host_allocation_is_out_of_memory(void)
     destroy_and_check_nothing_left(ctx, s);
 }
 
+/* ---- the binned traversal's lists without memory ---- */
+
+enum { BINNED_SIDE = 128 }; /* 16,384 rays from one eye: as few as the binned traversal takes */
+
+/* The default view of s as a depth image (`render`) or as its camera rays' hits, the binned
+ * traversal's two kinds of call; *out_binned: the rays that went through lists. */
+static vkrt_result binned_call(vkrt_context *ctx, vkrt_scene *s, bool render, const vkrt_ray *rays, float *out_rgba,
+                               vkrt_hit *out_hits, uint64_t *out_binned)
+{
+    const size_t n = (size_t)BINNED_SIDE * BINNED_SIDE;
+    vkrt_result r;
+    if (render) {
+        vkrt_render_stats st = { 0 };
+        r = vkrt_render(ctx, s, &(vkrt_render_desc){ .width = BINNED_SIDE, .height = BINNED_SIDE, .mode = VKRT_MODE_DEPTH },
+                        out_rgba, 4 * n, &st);
+        *out_binned = st.rays_binned;
+    } else {
+        vkrt_trace_stats st = { 0 };
+        r = vkrt_trace_rays(ctx, s, &(vkrt_trace_desc){ .out_stats = &st }, rays, n, out_hits);
+        *out_binned = st.rays_binned;
+    }
+    return r;
+}
+
+/* Host allocation N, then device allocation N, fails (N = 1, 2, ... until no allocation is left
+ * to fail) in a render and a trace call that the binned traversal takes: where the failure is
+ * in the lists (the plan's arrays, its threads, the entries' buffer), the BVH takes the rays
+ * and the call gives the same image or hits; elsewhere the call fails with the out-of-memory
+ * code. Either way nothing is leaked. */
+static void binned_lists_without_memory_leave_the_rays_to_the_bvh(void)
+{
+    vkrt_context *ctx = counted_context();
+    if (!ctx) return;
+    warm_up(ctx);
+    vk_context *vk = ctx->vk;
+    vkrt_result r;
+    vkrt_scene *s = bunny_scene(ctx, 0, &r);
+    const size_t n = (size_t)BINNED_SIDE * BINNED_SIDE;
+    vkrt_ray *rays = malloc(n * sizeof *rays);
+    vkrt_hit *hits = malloc(n * sizeof *hits), *want_hits = malloc(n * sizeof *want_hits);
+    float *rgba = malloc(4 * n * sizeof *rgba), *want_rgba = malloc(4 * n * sizeof *want_rgba);
+    CHECK(vkrt_camera_rays(ctx, NULL, BINNED_SIDE, BINNED_SIDE, rays, n) == VKRT_OK);
+    for (int render = 0; s && render < 2; render++) {
+        const char *what = render ? "binned render" : "binned trace_rays";
+        uint64_t want_binned = 0, binned = 0;
+        r = binned_call(ctx, s, render, rays, want_rgba, want_hits, &want_binned);
+        CHECK_MSG(r == VKRT_OK && want_binned > 0, "%s: %s, %" PRIu64 " rays through lists", what,
+                  vkrt_context_last_error(ctx), want_binned);
+        if (r != VKRT_OK || want_binned == 0) continue;
+        for (int device = 0; device < 2; device++) {
+            long k, fallbacks = 0, failures = 0;
+            for (k = 1;; k++) {
+                const long blocks = live_blocks;
+                const VkDeviceSize held = vk->memory_in_use;
+                alloc_calls = 0;
+                if (device) vk->fail_allocation = (uint32_t)k;
+                else alloc_fail_at = k;
+                r = binned_call(ctx, s, render, rays, rgba, hits, &binned);
+                const bool fired = device ? vk->fail_allocation == 0 : alloc_calls >= k;
+                vk->fail_allocation = 0;
+                alloc_fail_at = 0;
+                const bool same = render ? memcmp(rgba, want_rgba, 4 * n * sizeof *rgba) == 0
+                                         : memcmp(hits, want_hits, n * sizeof *hits) == 0;
+                if (!fired) {
+                    CHECK_MSG(r == VKRT_OK && binned == want_binned && same, "%s after %ld allocations: %s", what, k - 1,
+                              vkrt_result_string(r));
+                    break;
+                }
+                if (r == VKRT_OK) {
+                    CHECK_MSG(binned == 0 && same, "%s, %s allocation %ld failed and the call went on: %" PRIu64
+                              " rays through lists, output the same: %d", what, device ? "device" : "host", k, binned, same);
+                    fallbacks++;
+                } else {
+                    CHECK_MSG(r == (device ? VKRT_ERROR_OUT_OF_DEVICE_MEMORY : VKRT_ERROR_OUT_OF_MEMORY),
+                              "%s, %s allocation %ld failed: %s", what, device ? "device" : "host", k, vkrt_result_string(r));
+                    failures++;
+                }
+                CHECK_MSG(live_blocks == blocks && vk->memory_in_use == held,
+                          "%s, %s allocation %ld: %ld host blocks more, device memory %llu (was %llu)", what,
+                          device ? "device" : "host", k, live_blocks - blocks, (unsigned long long)vk->memory_in_use,
+                          (unsigned long long)held);
+            }
+            fprintf(stderr, "  %s: %ld %s allocations; %ld failures left the rays to the BVH, %ld failed the call\n", what,
+                    k - 1, device ? "device" : "host", fallbacks, failures);
+            /* The plan's arrays and threads (host), the entries' buffer (device). */
+            CHECK_MSG(fallbacks >= (device ? 1 : 4), "%s: only %ld %s allocation failures fell back", what, fallbacks,
+                      device ? "device" : "host");
+        }
+    }
+    free(rays);
+    free(hits);
+    free(want_hits);
+    free(rgba);
+    free(want_rgba);
+    destroy_and_check_nothing_left(ctx, s);
+}
+
 /* `test_scale sizes` runs the cases that hold for any speed of the machine, `test_scale timed`
  * those that measure wall-clock time (submission pacing, how soon a cancel or a lost device is
  * answered), which meson runs with no other test beside them; no argument runs both. */
@@ -1103,6 +1200,7 @@ int main(int argc, char **argv)
         RUN(binary_arrays_beyond_the_budget_fail_alone);
         RUN(every_failed_device_allocation_is_out_of_device_memory);
         RUN(every_failed_host_allocation_is_out_of_memory);
+        RUN(binned_lists_without_memory_leave_the_rays_to_the_bvh);
     }
     if (timed) {
         RUN(smallest_submissions_give_identical_results);
