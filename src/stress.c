@@ -587,7 +587,7 @@ static void camera_rays(ray_set *s, const double eye[3], const double target[3],
 /* ---- cases ------------------------------------------------------------------------- */
 
 typedef struct stress_case {
-    char name[40];
+    char name[48];
     smesh mesh;
     ray_set rays;
     bool both_builders;  /* degenerate geometry: every builder */
@@ -649,6 +649,88 @@ static void make_leak_case(stress_case *c, int which, bool quick, rng *r)
     leak_rays(&c->mesh, interior, &z, c->extent, r, &c->rays);
 }
 
+/* Rays from one eye at points of shared edges (the same parameters as leak_rays) and at shared
+ * vertices of a closed mesh, where the direction enters every face at the point by `margin`
+ * (the far side turned away): each must hit. Rays from one point are what the GPU backend's
+ * binned traversal takes on a CPU device (README, "Binned traversal"), whose lists must hold
+ * every triangle the watertight test may hit. */
+static void leak_rays_from_eye(const smesh *m, const double eye[3], double margin, ray_set *s)
+{
+    adjacency a;
+    if (!adjacency_build(m, &a)) {
+        s->failed = true;
+        return;
+    }
+    static const double params[] = { 0.5, 1.0 / 3.0, 0.25, 0.1, 0.9 };
+    for (size_t e = 0; e + 1 < a.edge_entries; e += 2) {
+        if (a.edges[e] != a.edges[e + 1]) { /* not a shared edge: the mesh is open here */
+            e--;
+            continue;
+        }
+        double p0[3], p1[3];
+        vertex(m, (uint32_t)(a.edges[e] >> 32), p0);
+        vertex(m, (uint32_t)(a.edges[e] & 0xffffffffu), p1);
+        const double *n0 = a.normals[a.edge_face[e]], *n1 = a.normals[a.edge_face[e + 1]];
+        for (size_t k = 0; k < sizeof params / sizeof params[0]; k++) {
+            double d[3];
+            for (int i = 0; i < 3; i++) d[i] = p0[i] + params[k] * (p1[i] - p0[i]) - eye[i];
+            if (normalize3(d) && dot3(d, n0) <= -margin && dot3(d, n1) <= -margin) add_ray(s, eye, d, true);
+        }
+    }
+    for (size_t v = 0; v < m->vertices; v++) {
+        uint32_t first = a.vert_first[v], count = a.vert_first[v + 1] - first;
+        double d[3];
+        vertex(m, (uint32_t)v, d);
+        for (int i = 0; i < 3; i++) d[i] -= eye[i];
+        bool enters = count > 0 && normalize3(d);
+        for (uint32_t k = 0; k < count && enters; k++) enters = dot3(d, a.normals[a.vert_faces[first + k]]) <= -margin;
+        if (enters) add_ray(s, eye, d, true);
+    }
+    adjacency_free(&a);
+}
+
+/* The mesh's box centre. */
+static void mesh_centre(const smesh *m, double out[3])
+{
+    double lo[3] = { INFINITY, INFINITY, INFINITY }, hi[3] = { -INFINITY, -INFINITY, -INFINITY };
+    for (size_t v = 0; v < m->vertices; v++) {
+        double p[3];
+        vertex(m, (uint32_t)v, p);
+        for (int i = 0; i < 3; i++) lo[i] = fmin(lo[i], p[i]), hi[i] = fmax(hi[i], p[i]);
+    }
+    for (int i = 0; i < 3; i++) out[i] = 0.5 * (lo[i] + hi[i]);
+}
+
+/* Camera rays enough for the binned traversal (16,384 at least, and no fewer than the
+ * triangles) from `eye` at the mesh's centre: every ray of a binned case from one point. */
+static void eye_camera_rays(stress_case *c, const double eye[3], bool quick)
+{
+    double at[3];
+    mesh_centre(&c->mesh, at);
+    int w = quick ? 128 : 256;
+    while ((size_t)w * (size_t)w < c->mesh.tris) w *= 2;
+    camera_rays(&c->rays, eye, at, w, w, false);
+}
+
+enum { CASE_EYE_ICOSPHERE, CASE_EYE_SLIVERS, CASE_EYE_COUNT_ };
+
+/* Leaks through the binned traversal: the icosphere and the sliver cylinder of the leak cases,
+ * every ray from one eye (leak_rays_from_eye, then camera rays). */
+static void make_eye_leak_case(stress_case *c, int which, bool quick)
+{
+    if (which == CASE_EYE_ICOSPHERE) make_icosphere(&c->mesh, quick ? 3 : 5);
+    else make_sliver_cylinder(&c->mesh, quick ? 256 : 2048);
+    snprintf(c->name, sizeof c->name, "eye-%s-%zu", which == CASE_EYE_ICOSPHERE ? "icosphere" : "slivers",
+             c->mesh.tris);
+    c->limit = 1e-4;
+    c->extent = mesh_extent(&c->mesh);
+    double centre[3];
+    mesh_centre(&c->mesh, centre);
+    const double eye[3] = { centre[0] + 0.7 * c->extent, centre[1] + 0.9 * c->extent, centre[2] + 2.2 * c->extent };
+    leak_rays_from_eye(&c->mesh, eye, 0.05, &c->rays);
+    eye_camera_rays(c, eye, quick);
+}
+
 /* Writes 1e-6, 1, 1e3 ... as the case name wants them. */
 static void power_name(char *out, size_t size, double v)
 {
@@ -659,13 +741,14 @@ static void power_name(char *out, size_t size, double v)
 
 /* An icosphere and a torus beside it, scaled by s about the origin and moved `offset` away
  * from it (along a fixed unit vector), seen by a camera moved along; plus rays from inside
- * the sphere. The ids of the camera rays must equal the reference's. */
-static void make_scale_case(stress_case *c, double s, double offset, bool quick, rng *r)
+ * the sphere, or with `one_eye` the camera's rays alone, as many as the binned traversal takes
+ * (`eye-scale...`). The ids of the camera rays must equal the reference's. */
+static void make_scale_case(stress_case *c, double s, double offset, bool one_eye, bool quick, rng *r)
 {
     char sn[16], dn[16];
     power_name(sn, sizeof sn, s);
     power_name(dn, sizeof dn, offset);
-    snprintf(c->name, sizeof c->name, "scale%s@%s", sn, dn);
+    snprintf(c->name, sizeof c->name, "%sscale%s@%s", one_eye ? "eye-" : "", sn, dn);
     const double dir[3] = { 0.8, 0.36, -0.48 };
     double at[3] = { offset * dir[0], offset * dir[1], offset * dir[2] };
     smesh sphere = { 0 }, torus = { 0 };
@@ -690,6 +773,11 @@ static void make_scale_case(stress_case *c, double s, double offset, bool quick,
     c->limit = 1e-4;
     c->extent = mesh_extent(&c->mesh);
     double eye[3] = { at[0] + s * 0.6, at[1] + s * 1.2, at[2] + s * 5.0 };
+    if (one_eye) {
+        int w = quick ? 128 : 256;
+        camera_rays(&c->rays, eye, at, w, w, false);
+        return;
+    }
     int w = quick ? 48 : 128;
     camera_rays(&c->rays, eye, at, w, w, false);
     for (int i = 0; i < (quick ? 300 : 3000); i++) {
@@ -1152,7 +1240,8 @@ static vkrt_result run_case(runner *u, const stress_case *c)
             for (int k = 0; k < 2; k++) {
                 vkrt_intersector isect = k == 0 ? VKRT_INTERSECTOR_WATERTIGHT : VKRT_INTERSECTOR_MOLLER_TRUMBORE;
                 if (u->o->intersector && u->o->intersector != isect) continue;
-                vkrt_trace_desc td = { .intersector = isect, .precision = VKRT_PRECISION_FLOAT };
+                vkrt_trace_stats ts = { 0 };
+                vkrt_trace_desc td = { .intersector = isect, .precision = VKRT_PRECISION_FLOAT, .out_stats = &ts };
                 if ((r = vkrt_trace_rays(ctx, scene, &td, c->rays.rays, n, got)) != VKRT_OK) {
                     r = failure(u, ctx, r, "tracing", c);
                     goto done;
@@ -1174,6 +1263,10 @@ static vkrt_result run_case(runner *u, const stress_case *c)
                 if (w.ref_leaks)
                     fprintf(u->out, "  note: the double reference missed %zu ray%s that must hit\n", w.ref_leaks,
                             w.ref_leaks == 1 ? "" : "s");
+                if (ts.rays_binned)
+                    fprintf(u->out, "  note: %s %s: %llu rays through the binned traversal's lists, %llu answered on "
+                                    "the host\n", backend == 0 ? "gpu" : "cpu", k == 0 ? "watertight" : "mt",
+                            (unsigned long long)ts.rays_binned, (unsigned long long)ts.rays_culled);
             }
             vkrt_scene_destroy(gs);
             gs = NULL;
@@ -1220,7 +1313,10 @@ vkrt_result stress_run(const stress_options *o, stress_report *out)
                                              { 1e3, 1e6 }, { 1e6, 1e6 } };
     static const double scales_quick[][2] = { { 1e-6, 0 }, { 1e6, 0 }, { 1e-6, 1e-3 }, { 1e3, 1e6 } };
     size_t scale_count = o->quick ? sizeof scales_quick / sizeof scales_quick[0] : sizeof scales_full / sizeof scales_full[0];
-    size_t total = CASE_LEAK_COUNT_ + scale_count + CASE_DEG_COUNT_ + CASE_RAY_COUNT_;
+    /* The binned traversal's cases: scales at both ends, and far from the origin. */
+    static const double eye_scales[][2] = { { 1e-6, 0 }, { 1e6, 0 }, { 1e3, 1e6 } };
+    const size_t eye_scale_count = sizeof eye_scales / sizeof eye_scales[0];
+    size_t total = CASE_LEAK_COUNT_ + scale_count + CASE_DEG_COUNT_ + CASE_RAY_COUNT_ + CASE_EYE_COUNT_ + eye_scale_count;
     rng random = { 0x5eed5eedull };
     for (size_t i = 0; i < total && r == VKRT_OK; i++) {
         stress_case c = { 0 };
@@ -1228,9 +1324,12 @@ vkrt_result stress_run(const stress_options *o, stress_report *out)
         if (k < CASE_LEAK_COUNT_) make_leak_case(&c, (int)k, o->quick, &random);
         else if ((k -= CASE_LEAK_COUNT_) < scale_count) {
             const double *s = o->quick ? scales_quick[k] : scales_full[k];
-            make_scale_case(&c, s[0], s[1], o->quick, &random);
+            make_scale_case(&c, s[0], s[1], false, o->quick, &random);
         } else if ((k -= scale_count) < CASE_DEG_COUNT_) make_degenerate_case(&c, (int)k, o->quick, &random);
-        else make_ray_case(&c, (int)(k - CASE_DEG_COUNT_), o->quick, &random);
+        else if ((k -= CASE_DEG_COUNT_) < CASE_RAY_COUNT_) make_ray_case(&c, (int)k, o->quick, &random);
+        else if ((k -= CASE_RAY_COUNT_) < CASE_EYE_COUNT_) make_eye_leak_case(&c, (int)k, o->quick);
+        else make_scale_case(&c, eye_scales[k - CASE_EYE_COUNT_][0], eye_scales[k - CASE_EYE_COUNT_][1], true, o->quick,
+                             &random);
         r = run_case(&u, &c);
         case_free(&c);
     }
