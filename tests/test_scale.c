@@ -693,6 +693,22 @@ static vkrt_scene *bunny_scene(vkrt_context *ctx, VkDeviceSize limit, vkrt_resul
     return s;
 }
 
+/* A counted context after its warm-up, and the bunny's scene in *out_scene; NULL, with nothing
+ * left behind, where either fails. */
+static vkrt_context *warm_bunny_context(vkrt_scene **out_scene)
+{
+    *out_scene = NULL;
+    vkrt_context *ctx = counted_context();
+    if (!ctx) return NULL;
+    warm_up(ctx);
+    vkrt_result r;
+    *out_scene = bunny_scene(ctx, 0, &r);
+    CHECK_MSG(*out_scene != NULL, "the bunny: %s", vkrt_context_last_error(ctx));
+    if (*out_scene) return ctx;
+    vkrt_context_destroy(ctx);
+    return NULL;
+}
+
 /* Whether the context's recycled blocks are exactly `handles` (in any order). */
 static bool recycled_are(const vk_context *vk, const VkDeviceMemory *handles, uint32_t count)
 {
@@ -713,16 +729,10 @@ static bool recycled_are(const vk_context *vk, const VkDeviceMemory *handles, ui
  * released rather than kept beyond it). */
 static void device_memory_of_a_call_is_reused_by_the_next(void)
 {
-    vkrt_context *ctx = counted_context();
+    vkrt_scene *s;
+    vkrt_context *ctx = warm_bunny_context(&s);
     if (!ctx) return;
-    warm_up(ctx);
     vk_context *vk = ctx->vk;
-    vkrt_result r;
-    vkrt_scene *s = bunny_scene(ctx, 0, &r);
-    if (!s) {
-        vkrt_context_destroy(ctx);
-        return;
-    }
     const VkDeviceSize scene_held = vk->memory_in_use;
     CHECK(op_rays(ctx, s) == VKRT_OK);
     VkDeviceMemory before[VK_RECYCLED_BLOCKS];
@@ -748,7 +758,7 @@ static void device_memory_of_a_call_is_reused_by_the_next(void)
     const VkDeviceSize held = vk->memory_in_use, pooled = vk->recycled_bytes;
     CHECK(pooled > 0);
     vk->memory_budget = held;
-    r = op_render(ctx, s);
+    vkrt_result r = op_render(ctx, s);
     CHECK_MSG(r == VKRT_ERROR_OUT_OF_DEVICE_MEMORY, "a render with no room in the budget: %s", vkrt_result_string(r));
     CHECK_MSG(vk->memory_in_use == held && vk->memory_in_use + vk->recycled_bytes <= vk->memory_budget,
               "after it: %llu bytes in use (%llu before), %llu recycled, budget %llu",
@@ -1109,18 +1119,17 @@ static vkrt_result binned_call(vkrt_context *ctx, vkrt_scene *s, bool render, co
  * code. Either way nothing is leaked. */
 static void binned_lists_without_memory_leave_the_rays_to_the_bvh(void)
 {
-    vkrt_context *ctx = counted_context();
+    const size_t n = (size_t)BINNED_SIDE * BINNED_SIDE;
+    vkrt_scene *s;
+    vkrt_context *ctx = warm_bunny_context(&s);
     if (!ctx) return;
-    warm_up(ctx);
     vk_context *vk = ctx->vk;
     vkrt_result r;
-    vkrt_scene *s = bunny_scene(ctx, 0, &r);
-    const size_t n = (size_t)BINNED_SIDE * BINNED_SIDE;
     vkrt_ray *rays = malloc(n * sizeof *rays);
     vkrt_hit *hits = malloc(n * sizeof *hits), *want_hits = malloc(n * sizeof *want_hits);
     float *rgba = malloc(4 * n * sizeof *rgba), *want_rgba = malloc(4 * n * sizeof *want_rgba);
     CHECK(vkrt_camera_rays(ctx, NULL, BINNED_SIDE, BINNED_SIDE, rays, n) == VKRT_OK);
-    for (int render = 0; s && render < 2; render++) {
+    for (int render = 0; render < 2; render++) {
         const char *what = render ? "binned render" : "binned trace_rays";
         uint64_t want_binned = 0, binned = 0;
         r = binned_call(ctx, s, render, rays, want_rgba, want_hits, &want_binned);
