@@ -695,7 +695,8 @@ static void report_skips(const vkrt_scene *scene, const vkrt_render_desc *d, con
         fprintf(stderr, "vkrt: traversal: naive, chosen by the cost model (the BVH's SAH cost is not below the triangle count)\n");
     if (stats->rays_binned)
         fprintf(stderr, "vkrt: traversal: binned, the camera rays' triangle lists built on the host (a CPU device; README, "
-                        "\"Binned traversal\")\n");
+                        "\"Binned traversal\"): %" PRIu64 " triangle tests, %.2f a ray\n",
+                stats->binned_tests, (double)stats->binned_tests / (double)stats->rays_binned);
     if (d->mode < VKRT_MODE_SHADED) {
         fprintf(stderr, "vkrt: skipped: lights, shadows and random numbers (a primary mode); surfaces %s\n",
                 d->mode == VKRT_MODE_ALBEDO || d->mode == VKRT_MODE_UV ? "read" : "not uploaded (this mode does not read them)");
