@@ -34,13 +34,11 @@ typedef struct render_objects {
     vk_buffer hits;
     vk_buffer rays;
     VkBufferView hit_words, ray_texels; /* the wide traversal's views: R32UI of hits, RGBA32UI of rays */
-    vk_buffer slot_tris;                /* the wide ray trace's triangles so far, by ray slot */
-    VkBufferView slot_tri_words;        /* its R32UI view */
-    vk_buffer ray_lists;                /* the binned traversal's first entry and entry count, a ray */
-    VkBufferView ray_list_words;        /* its R32UI view */
-    vk_buffer list_tris_placeholder;    /* one texel, where no call's lists are bound */
-    VkBufferView list_tris_own;         /* its R32UI view */
-    VkBufferView list_tris;             /* what the set binds: the call's lists (borrowed) or list_tris_own */
+    vk_texel_buffer slot_tris;          /* the wide ray trace's triangles so far, by ray slot (words) */
+    vk_texel_buffer ray_lists;          /* the binned traversal's first entry and entry count, a ray */
+    vk_texel_buffer list_tris_placeholder; /* one word, where no call's lists are bound */
+    VkBufferView list_tris;             /* what the set binds: the call's lists (borrowed) or the
+                                           placeholder's view */
     vk_buffer resume;
     vk_buffer resume_stack;
     vk_buffer unfinished; /* host-visible: read after every submission */
@@ -59,12 +57,9 @@ static void render_objects_destroy(vk_context *vk, render_objects *o)
     vk_memory_free(vk, o->image_memory, &o->image_allocation);
     if (o->hit_words) vkDestroyBufferView(vk->device, o->hit_words, NULL);
     if (o->ray_texels) vkDestroyBufferView(vk->device, o->ray_texels, NULL);
-    if (o->slot_tri_words) vkDestroyBufferView(vk->device, o->slot_tri_words, NULL);
-    vk_buffer_destroy(vk, &o->slot_tris);
-    if (o->ray_list_words) vkDestroyBufferView(vk->device, o->ray_list_words, NULL);
-    vk_buffer_destroy(vk, &o->ray_lists);
-    if (o->list_tris_own) vkDestroyBufferView(vk->device, o->list_tris_own, NULL);
-    vk_buffer_destroy(vk, &o->list_tris_placeholder);
+    vk_texel_buffer_destroy(vk, &o->slot_tris);
+    vk_texel_buffer_destroy(vk, &o->ray_lists);
+    vk_texel_buffer_destroy(vk, &o->list_tris_placeholder);
     vk_buffer_destroy(vk, &o->readback);
     vk_buffer_destroy(vk, &o->hits);
     vk_buffer_destroy(vk, &o->rays);
@@ -163,7 +158,7 @@ static vkrt_result create_descriptors(vk_context *vk, const gpu_scene *scene, Vk
                                               .descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_IMAGE, .pImageInfo = &image };
     const VkBufferView texels[VKRT_BINDING_TEXEL_COUNT] = { scene->wide_nodes.view, scene->trace_tris.view,
                                                             o->ray_texels,          o->hit_words,
-                                                            o->slot_tri_words,      o->ray_list_words,
+                                                            o->slot_tris.view,      o->ray_lists.view,
                                                             o->list_tris };
     for (uint32_t i = 0; i < VKRT_BINDING_TEXEL_COUNT; i++)
         writes[BUFFERS + 1 + i] = (VkWriteDescriptorSet){ .sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET,
@@ -227,24 +222,11 @@ static vkrt_result create_render_objects(vk_context *vk, const gpu_scene *scene,
     if (r == VKRT_OK) r = vk_buffer_view_create(vk, o->hits.buffer, o->hits.size, VK_FORMAT_R32_UINT, &o->hit_words);
     if (r == VKRT_OK)
         r = vk_buffer_view_create(vk, o->rays.buffer, o->rays.size, VK_FORMAT_R32G32B32A32_UINT, &o->ray_texels);
-    if (r == VKRT_OK)
-        r = vk_buffer_create(vk, (VkDeviceSize)(slot_words ? slot_words : 1) * sizeof(uint32_t),
-                             VK_BUFFER_USAGE_STORAGE_TEXEL_BUFFER_BIT, VK_MEMORY_DEVICE, "vkrt ray slot triangles",
-                             &o->slot_tris);
-    if (r == VKRT_OK)
-        r = vk_buffer_view_create(vk, o->slot_tris.buffer, o->slot_tris.size, VK_FORMAT_R32_UINT, &o->slot_tri_words);
-    if (r == VKRT_OK)
-        r = vk_buffer_create(vk, (list_rays ? 2 * (VkDeviceSize)list_rays : 1) * sizeof(uint32_t),
-                             VK_BUFFER_USAGE_STORAGE_TEXEL_BUFFER_BIT, VK_MEMORY_DEVICE, "vkrt ray lists", &o->ray_lists);
-    if (r == VKRT_OK)
-        r = vk_buffer_view_create(vk, o->ray_lists.buffer, o->ray_lists.size, VK_FORMAT_R32_UINT, &o->ray_list_words);
+    if (r == VKRT_OK) r = vk_word_buffer_create(vk, slot_words, "vkrt ray slot triangles", &o->slot_tris);
+    if (r == VKRT_OK) r = vk_word_buffer_create(vk, 2 * (size_t)list_rays, "vkrt ray lists", &o->ray_lists);
     if (r == VKRT_OK && !list_tris)
-        r = vk_buffer_create(vk, sizeof(uint32_t), VK_BUFFER_USAGE_STORAGE_TEXEL_BUFFER_BIT, VK_MEMORY_DEVICE,
-                             "vkrt list triangles placeholder", &o->list_tris_placeholder);
-    if (r == VKRT_OK && !list_tris)
-        r = vk_buffer_view_create(vk, o->list_tris_placeholder.buffer, o->list_tris_placeholder.size,
-                                  VK_FORMAT_R32_UINT, &o->list_tris_own);
-    o->list_tris = list_tris ? list_tris : o->list_tris_own;
+        r = vk_word_buffer_create(vk, 1, "vkrt list triangles placeholder", &o->list_tris_placeholder);
+    o->list_tris = list_tris ? list_tris : o->list_tris_placeholder.view;
     const VkDeviceSize slots = resume_slots ? resume_slots : 1;
     if (r == VKRT_OK)
         r = vk_buffer_create(vk, slots * sizeof(vkrt_gpu_resume), VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, VK_MEMORY_DEVICE,
@@ -766,14 +748,12 @@ static bool binning_suits(const vk_context *vk, const gpu_scene *scene, const vk
 typedef struct binned_lists {
     bool built;             /* the rays share one origin and their lists keep within the limits */
     ray_bins bins;
-    vk_buffer tris;         /* the entries, triangle indices */
-    VkBufferView tri_words; /* its R32UI view */
+    vk_texel_buffer tris;   /* the entries, triangle indices */
 } binned_lists;
 
 static void binned_lists_destroy(vk_context *vk, binned_lists *l)
 {
-    if (l->tri_words) vkDestroyBufferView(vk->device, l->tri_words, NULL);
-    vk_buffer_destroy(vk, &l->tris);
+    vk_texel_buffer_destroy(vk, &l->tris);
     ray_bins_destroy(vk->core, &l->bins);
     memset(l, 0, sizeof *l);
 }
@@ -797,19 +777,16 @@ static vkrt_result host_words_end(vk_context *vk, vk_buffer *b, uint32_t *w, siz
 }
 
 /* The planned lists' entries, written into their buffer (a CPU device's memory is the host's:
- * where the device reads them), and its R32UI view. */
+ * where the device reads them). */
 static vkrt_result binned_lists_upload(vk_context *vk, binned_lists *l)
 {
     const uint32_t entries = l->bins.entry_count;
-    vkrt_result r = vk_buffer_create(vk, (VkDeviceSize)(entries ? entries : 1) * sizeof(uint32_t),
-                                     VK_BUFFER_USAGE_STORAGE_TEXEL_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT,
-                                     VK_MEMORY_DEVICE, "vkrt triangle lists", &l->tris);
+    vkrt_result r = vk_word_buffer_create(vk, entries, "vkrt triangle lists", &l->tris);
     if (r != VKRT_OK) return r;
-    uint32_t *words = host_words_begin(vk, &l->tris, entries, "list entries");
+    uint32_t *words = host_words_begin(vk, &l->tris.buffer, entries, "list entries");
     if (!words) return VKRT_ERROR_OUT_OF_MEMORY;
     ray_bin_fill(&l->bins, words);
-    if ((r = host_words_end(vk, &l->tris, words, entries)) != VKRT_OK) return r;
-    return vk_buffer_view_create(vk, l->tris.buffer, l->tris.size, VK_FORMAT_R32_UINT, &l->tri_words);
+    return host_words_end(vk, &l->tris.buffer, words, entries);
 }
 
 /* Lists the triangles of `count` rays (those of `rays`, else the primary rays of `camera`,
@@ -864,7 +841,7 @@ static vkrt_result rect_lists(vk_context *vk, render_objects *o, const ray_bins 
                               const vkrt_gpu_push *push, uint64_t *tests)
 {
     const size_t n = (size_t)push->tile_width * push->tile_height;
-    uint32_t *words = host_words_begin(vk, &o->ray_lists, 2 * n, "the pixels' lists");
+    uint32_t *words = host_words_begin(vk, &o->ray_lists.buffer, 2 * n, "the pixels' lists");
     if (!words) return VKRT_ERROR_OUT_OF_MEMORY;
     for (uint32_t row = 0; row < push->tile_height; row++)
         for (uint32_t col = 0; col < push->tile_width; col++) {
@@ -872,7 +849,7 @@ static vkrt_result rect_lists(vk_context *vk, render_objects *o, const ray_bins 
             ray_bin_list(bins, (push->tile_y + row) * width + push->tile_x + col, list);
             *tests += list[1];
         }
-    return host_words_end(vk, &o->ray_lists, words, 2 * n);
+    return host_words_end(vk, &o->ray_lists.buffer, words, 2 * n);
 }
 
 vkrt_result gpu_trace_render(vk_context *vk, const gpu_scene *scene, const gpu_trace_params *params,
@@ -927,7 +904,7 @@ vkrt_result gpu_trace_render(vk_context *vk, const gpu_scene *scene, const gpu_t
     render_objects o;
     r = create_render_objects(vk, scene, pipe.set_layout, tile_w, tile_h, naive ? tile_w * tile_h : 1, 0,
                               budget ? tile_w * tile_h : 0, variant.counters ? tile_w * tile_h : 0, 0,
-                              lists.built ? tile_w * tile_h : 0, lists.built ? lists.tri_words : VK_NULL_HANDLE, &o);
+                              lists.built ? tile_w * tile_h : 0, lists.built ? lists.tris.view : VK_NULL_HANDLE, &o);
     gpu_pacer pacer;
     pacer_for(vk, scene, naive, (uint64_t)tile_w * tile_h, &pacer);
     const uint32_t tiles_x = core_div_up(width, tile_w), tiles_y = core_div_up(height, tile_h);
@@ -1099,7 +1076,7 @@ static vkrt_result ray_chunk_create(ray_call *call, ray_chunk *c, bool readback)
         vk, call->scene, call->pipe.set_layout, 1, 1, call->capacity, call->capacity,
         call->budget ? ray_resume_slots(call->scene, call->naive, call->capacity) : 0, 0,
         call->lists.built ? 0 : ray_slot_words(call->scene, call->naive, call->capacity),
-        call->lists.built ? call->capacity : 0, call->lists.built ? call->lists.tri_words : VK_NULL_HANDLE, &c->o);
+        call->lists.built ? call->capacity : 0, call->lists.built ? call->lists.tris.view : VK_NULL_HANDLE, &c->o);
     c->created = true;
     if (r == VKRT_OK && readback) r = create_hit_readback(vk, &c->o, call->capacity);
     if (r == VKRT_OK && call->cull && !(c->sent_index = core_calloc_array(vk->core, call->capacity, sizeof *c->sent_index)))
@@ -1120,13 +1097,13 @@ static void ray_chunk_destroy(vk_context *vk, ray_chunk *c)
  * position `first`, into its list buffer, in the order the rays were sent. */
 static vkrt_result ray_chunk_lists(ray_call *call, ray_chunk *c, size_t first, uint32_t n)
 {
-    uint32_t *words = host_words_begin(call->vk, &c->o.ray_lists, 2 * (size_t)n, "the rays' lists");
+    uint32_t *words = host_words_begin(call->vk, &c->o.ray_lists.buffer, 2 * (size_t)n, "the rays' lists");
     if (!words) return VKRT_ERROR_OUT_OF_MEMORY;
     for (uint32_t i = 0; i < n; i++) {
         ray_bin_list(&call->lists.bins, (uint32_t)(first + (call->cull ? c->sent_index[i] : i)), words + 2 * i);
         call->binned_tests += words[2 * i + 1];
     }
-    return host_words_end(call->vk, &c->o.ray_lists, words, 2 * (size_t)n);
+    return host_words_end(call->vk, &c->o.ray_lists.buffer, words, 2 * (size_t)n);
 }
 
 /* Reads the call's next rays into chunk c, as many as the pacer allows and its buffers hold:

@@ -317,6 +317,17 @@ vkrt_result vk_buffer_view_create(vk_context *vk, VkBuffer buffer, VkDeviceSize 
     return VKRT_OK;
 }
 
+vkrt_result vk_word_buffer_create(vk_context *vk, size_t words, const char *label, vk_texel_buffer *out)
+{
+    memset(out, 0, sizeof *out);
+    const VkDeviceSize bytes = (VkDeviceSize)(words ? words : 1) * sizeof(uint32_t);
+    vkrt_result r = vk_buffer_create(vk, bytes, VK_BUFFER_USAGE_STORAGE_TEXEL_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT,
+                                     VK_MEMORY_DEVICE, label, &out->buffer);
+    if (r == VKRT_OK) r = vk_buffer_view_create(vk, out->buffer.buffer, bytes, VK_FORMAT_R32_UINT, &out->view);
+    if (r != VKRT_OK) vk_texel_buffer_destroy(vk, out);
+    return r;
+}
+
 void vk_texel_buffer_destroy(vk_context *vk, vk_texel_buffer *t)
 {
     if (t->view) vkDestroyBufferView(vk->device, t->view, NULL);

@@ -47,6 +47,11 @@ vkrt_result vk_texel_buffer_create(vk_context *vk, const uint32_t *data, uint32_
 vkrt_result vk_buffer_view_create(vk_context *vk, VkBuffer buffer, VkDeviceSize bytes, VkFormat format,
                                   VkBufferView *out);
 void vk_texel_buffer_destroy(vk_context *vk, vk_texel_buffer *t);
+/* A texel buffer of `words` R32UI texels (at least one) that the host fills after this returns,
+ * through buffer.mapped where the device's memory is mapped, else by vk_buffer_upload; the
+ * shaders read and write it a word at a time (imageLoad, imageStore). Destroy with
+ * vk_texel_buffer_destroy. */
+vkrt_result vk_word_buffer_create(vk_context *vk, size_t words, const char *label, vk_texel_buffer *out);
 
 /* Fills a device buffer: a memcpy when it is mapped, else through a staging buffer. */
 vkrt_result vk_buffer_upload(vk_context *vk, vk_buffer *dst, const void *data, VkDeviceSize size);
