@@ -78,7 +78,7 @@ static const char *traversal_name(vkrt_traversal t) { return t == VKRT_TRAVERSAL
 
 /* A row's traversal as the table shows it: "bvh, binned" where the library took the camera rays
  * through the host's lists instead of the BVH asked for (README, "Binned traversal"; its trace
- * ms holds the listing, its boxes/ray are the BVH's). The CSV keeps "bvh" and says so in a
+ * ms holds the listing, its counts are the lists' tests). The CSV keeps "bvh" and says so in a
  * column of its own. */
 static const char *row_traversal(const row *w) { return w->binned ? "bvh, binned" : traversal_name(w->c.traversal); }
 static const char *isect_name(vkrt_intersector i) { return i == VKRT_INTERSECTOR_MOLLER_TRUMBORE ? "mt" : "watertight"; }

@@ -504,9 +504,11 @@ typedef struct leak_sizes {
     size_t inside;            /* random rays from inside */
 } leak_sizes;
 
-/* Rays aimed at points of shared edges (the midpoint and other parameters) and at shared
- * vertices, from outside along entering directions and from inside; random rays from inside.
- * All must hit. */
+/* Where along a shared edge the leak rays aim (the midpoint and other parameters). */
+static const double edge_params[] = { 0.5, 1.0 / 3.0, 0.25, 0.1, 0.9 };
+
+/* Rays aimed at points of shared edges (edge_params) and at shared vertices, from outside along
+ * entering directions and from inside; random rays from inside. All must hit. */
 static void leak_rays(const smesh *m, interior_fn interior, const leak_sizes *z, double dist, rng *r, ray_set *s)
 {
     adjacency a;
@@ -514,7 +516,6 @@ static void leak_rays(const smesh *m, interior_fn interior, const leak_sizes *z,
         s->failed = true;
         return;
     }
-    static const double params[] = { 0.5, 1.0 / 3.0, 0.25, 0.1, 0.9 };
     size_t unique = a.edge_entries / 2;
     size_t step = unique > z->edges ? unique / z->edges : 1;
     for (size_t e = 0; e + 1 < a.edge_entries; e += 2 * step) {
@@ -527,9 +528,9 @@ static void leak_rays(const smesh *m, interior_fn interior, const leak_sizes *z,
         vertex(m, (uint32_t)(a.edges[e] & 0xffffffffu), p1);
         memcpy(normals[0], a.normals[a.edge_face[e]], sizeof normals[0]);
         memcpy(normals[1], a.normals[a.edge_face[e + 1]], sizeof normals[1]);
-        for (size_t k = 0; k < sizeof params / sizeof params[0]; k++) {
+        for (size_t k = 0; k < sizeof edge_params / sizeof edge_params[0]; k++) {
             double p[3], o[3];
-            for (int i = 0; i < 3; i++) p[i] = p0[i] + params[k] * (p1[i] - p0[i]);
+            for (int i = 0; i < 3; i++) p[i] = p0[i] + edge_params[k] * (p1[i] - p0[i]);
             aim_from_outside(s, r, p, (const double (*)[3])normals, 2, z->dirs, dist);
             interior(r, o);
             double d[3] = { p[0] - o[0], p[1] - o[1], p[2] - o[2] };
@@ -604,14 +605,20 @@ static void case_free(stress_case *c)
     memset(c, 0, sizeof *c);
 }
 
-static double mesh_extent(const smesh *m)
+static void mesh_bounds(const smesh *m, double lo[3], double hi[3])
 {
-    double lo[3] = { INFINITY, INFINITY, INFINITY }, hi[3] = { -INFINITY, -INFINITY, -INFINITY }, e = 0;
+    for (int i = 0; i < 3; i++) lo[i] = INFINITY, hi[i] = -INFINITY;
     for (size_t v = 0; v < m->vertices; v++)
         for (int i = 0; i < 3; i++) {
             lo[i] = fmin(lo[i], m->pos[3 * v + i]);
             hi[i] = fmax(hi[i], m->pos[3 * v + i]);
         }
+}
+
+static double mesh_extent(const smesh *m)
+{
+    double lo[3], hi[3], e = 0;
+    mesh_bounds(m, lo, hi);
     for (int i = 0; i < 3; i++) e = fmax(e, hi[i] - lo[i]);
     return e;
 }
@@ -649,7 +656,7 @@ static void make_leak_case(stress_case *c, int which, bool quick, rng *r)
     leak_rays(&c->mesh, interior, &z, c->extent, r, &c->rays);
 }
 
-/* Rays from one eye at points of shared edges (the same parameters as leak_rays) and at shared
+/* Rays from one eye at points of shared edges (edge_params) and at shared
  * vertices of a closed mesh, where the direction enters every face at the point by `margin`
  * (the far side turned away): each must hit. Rays from one point are what the GPU backend's
  * binned traversal takes on a CPU device (README, "Binned traversal"), whose lists must hold
@@ -661,7 +668,6 @@ static void leak_rays_from_eye(const smesh *m, const double eye[3], double margi
         s->failed = true;
         return;
     }
-    static const double params[] = { 0.5, 1.0 / 3.0, 0.25, 0.1, 0.9 };
     for (size_t e = 0; e + 1 < a.edge_entries; e += 2) {
         if (a.edges[e] != a.edges[e + 1]) { /* not a shared edge: the mesh is open here */
             e--;
@@ -671,9 +677,9 @@ static void leak_rays_from_eye(const smesh *m, const double eye[3], double margi
         vertex(m, (uint32_t)(a.edges[e] >> 32), p0);
         vertex(m, (uint32_t)(a.edges[e] & 0xffffffffu), p1);
         const double *n0 = a.normals[a.edge_face[e]], *n1 = a.normals[a.edge_face[e + 1]];
-        for (size_t k = 0; k < sizeof params / sizeof params[0]; k++) {
+        for (size_t k = 0; k < sizeof edge_params / sizeof edge_params[0]; k++) {
             double d[3];
-            for (int i = 0; i < 3; i++) d[i] = p0[i] + params[k] * (p1[i] - p0[i]) - eye[i];
+            for (int i = 0; i < 3; i++) d[i] = p0[i] + edge_params[k] * (p1[i] - p0[i]) - eye[i];
             if (normalize3(d) && dot3(d, n0) <= -margin && dot3(d, n1) <= -margin) add_ray(s, eye, d, true);
         }
     }
@@ -687,29 +693,6 @@ static void leak_rays_from_eye(const smesh *m, const double eye[3], double margi
         if (enters) add_ray(s, eye, d, true);
     }
     adjacency_free(&a);
-}
-
-/* The mesh's box centre. */
-static void mesh_centre(const smesh *m, double out[3])
-{
-    double lo[3] = { INFINITY, INFINITY, INFINITY }, hi[3] = { -INFINITY, -INFINITY, -INFINITY };
-    for (size_t v = 0; v < m->vertices; v++) {
-        double p[3];
-        vertex(m, (uint32_t)v, p);
-        for (int i = 0; i < 3; i++) lo[i] = fmin(lo[i], p[i]), hi[i] = fmax(hi[i], p[i]);
-    }
-    for (int i = 0; i < 3; i++) out[i] = 0.5 * (lo[i] + hi[i]);
-}
-
-/* Camera rays enough for the binned traversal (16,384 at least, and no fewer than the
- * triangles) from `eye` at the mesh's centre: every ray of a binned case from one point. */
-static void eye_camera_rays(stress_case *c, const double eye[3], bool quick)
-{
-    double at[3];
-    mesh_centre(&c->mesh, at);
-    int w = quick ? 128 : 256;
-    while ((size_t)w * (size_t)w < c->mesh.tris) w *= 2;
-    camera_rays(&c->rays, eye, at, w, w, false);
 }
 
 enum { CASE_EYE_ICOSPHERE, CASE_EYE_SLIVERS, CASE_EYE_COUNT_ };
@@ -726,11 +709,16 @@ static void make_eye_leak_case(stress_case *c, int which, bool quick)
              c->mesh.tris);
     c->limit = 1e-4;
     c->extent = mesh_extent(&c->mesh);
-    double centre[3];
-    mesh_centre(&c->mesh, centre);
+    double lo[3], hi[3], centre[3];
+    mesh_bounds(&c->mesh, lo, hi);
+    for (int i = 0; i < 3; i++) centre[i] = 0.5 * (lo[i] + hi[i]);
     const double eye[3] = { centre[0] + 0.7 * c->extent, centre[1] + 0.9 * c->extent, centre[2] + 2.2 * c->extent };
     leak_rays_from_eye(&c->mesh, eye, 0.05, &c->rays);
-    eye_camera_rays(c, eye, quick);
+    /* Then camera rays at the centre, as many as the binned traversal takes (16,384 at least,
+     * and no fewer than the triangles): every ray of the case from the one eye. */
+    int w = quick ? 128 : 256;
+    while ((size_t)w * (size_t)w < c->mesh.tris) w *= 2;
+    camera_rays(&c->rays, eye, centre, w, w, false);
 }
 
 /* Writes 1e-6, 1, 1e3 ... as the case name wants them. */
