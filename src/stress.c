@@ -615,12 +615,19 @@ static void mesh_bounds(const smesh *m, double lo[3], double hi[3])
         }
 }
 
-static double mesh_extent(const smesh *m)
+/* The largest side of a box. */
+static double box_extent(const double lo[3], const double hi[3])
 {
-    double lo[3], hi[3], e = 0;
-    mesh_bounds(m, lo, hi);
+    double e = 0;
     for (int i = 0; i < 3; i++) e = fmax(e, hi[i] - lo[i]);
     return e;
+}
+
+static double mesh_extent(const smesh *m)
+{
+    double lo[3], hi[3];
+    mesh_bounds(m, lo, hi);
+    return box_extent(lo, hi);
 }
 
 enum { CASE_LEAK_ICOSPHERE, CASE_LEAK_TORUS, CASE_LEAK_CUBE, CASE_LEAK_SLIVERS, CASE_LEAK_COUNT_ };
@@ -708,9 +715,9 @@ static void make_eye_leak_case(stress_case *c, int which, bool quick)
     snprintf(c->name, sizeof c->name, "eye-%s-%zu", which == CASE_EYE_ICOSPHERE ? "icosphere" : "slivers",
              c->mesh.tris);
     c->limit = 1e-4;
-    c->extent = mesh_extent(&c->mesh);
     double lo[3], hi[3], centre[3];
     mesh_bounds(&c->mesh, lo, hi);
+    c->extent = box_extent(lo, hi);
     for (int i = 0; i < 3; i++) centre[i] = 0.5 * (lo[i] + hi[i]);
     const double eye[3] = { centre[0] + 0.7 * c->extent, centre[1] + 0.9 * c->extent, centre[2] + 2.2 * c->extent };
     leak_rays_from_eye(&c->mesh, eye, 0.05, &c->rays);

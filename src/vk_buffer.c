@@ -281,21 +281,27 @@ vkrt_result vk_buffer_upload(vk_context *vk, vk_buffer *dst, const void *data, V
     return r;
 }
 
+/* A storage texel buffer of `bytes` and its view in `format`: what vk_texel_buffer_create and
+ * vk_word_buffer_create make before the contents. */
+static vkrt_result texel_buffer_make(vk_context *vk, VkDeviceSize bytes, VkFormat format, const char *label,
+                                     vk_texel_buffer *out)
+{
+    memset(out, 0, sizeof *out);
+    vkrt_result r = vk_buffer_create(vk, bytes, VK_BUFFER_USAGE_STORAGE_TEXEL_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT,
+                                     VK_MEMORY_DEVICE, label, &out->buffer);
+    if (r == VKRT_OK) r = vk_buffer_view_create(vk, out->buffer.buffer, bytes, format, &out->view);
+    if (r != VKRT_OK) vk_texel_buffer_destroy(vk, out);
+    return r;
+}
+
 vkrt_result vk_texel_buffer_create(vk_context *vk, const uint32_t *data, uint32_t texels, const char *label,
                                    vk_texel_buffer *out)
 {
-    memset(out, 0, sizeof *out);
     const uint32_t zero[4] = { 0 };
     const VkDeviceSize bytes = (VkDeviceSize)(texels ? texels : 1) * sizeof zero;
-    vkrt_result r = vk_buffer_create(vk, bytes, VK_BUFFER_USAGE_STORAGE_TEXEL_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT,
-                                     VK_MEMORY_DEVICE, label, &out->buffer);
+    vkrt_result r = texel_buffer_make(vk, bytes, VK_FORMAT_R32G32B32A32_UINT, label, out);
     if (r == VKRT_OK) r = vk_buffer_upload(vk, &out->buffer, texels ? (const void *)data : zero, bytes);
-    if (r != VKRT_OK) {
-        vk_texel_buffer_destroy(vk, out);
-        return r;
-    }
-    if ((r = vk_buffer_view_create(vk, out->buffer.buffer, bytes, VK_FORMAT_R32G32B32A32_UINT, &out->view)) != VKRT_OK)
-        vk_texel_buffer_destroy(vk, out);
+    if (r != VKRT_OK) vk_texel_buffer_destroy(vk, out);
     return r;
 }
 
@@ -319,13 +325,7 @@ vkrt_result vk_buffer_view_create(vk_context *vk, VkBuffer buffer, VkDeviceSize 
 
 vkrt_result vk_word_buffer_create(vk_context *vk, size_t words, const char *label, vk_texel_buffer *out)
 {
-    memset(out, 0, sizeof *out);
-    const VkDeviceSize bytes = (VkDeviceSize)(words ? words : 1) * sizeof(uint32_t);
-    vkrt_result r = vk_buffer_create(vk, bytes, VK_BUFFER_USAGE_STORAGE_TEXEL_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT,
-                                     VK_MEMORY_DEVICE, label, &out->buffer);
-    if (r == VKRT_OK) r = vk_buffer_view_create(vk, out->buffer.buffer, bytes, VK_FORMAT_R32_UINT, &out->view);
-    if (r != VKRT_OK) vk_texel_buffer_destroy(vk, out);
-    return r;
+    return texel_buffer_make(vk, (VkDeviceSize)(words ? words : 1) * sizeof(uint32_t), VK_FORMAT_R32_UINT, label, out);
 }
 
 void vk_texel_buffer_destroy(vk_context *vk, vk_texel_buffer *t)
