@@ -1331,8 +1331,11 @@ static void gpu_renders_take_lists_with_the_bvh_image(void)
 
 /* The host's lists themselves (src/ray_bin.h), on a scene's own triangles: every slot written,
  * each list in the triangles' order without repeats, and every triangle the watertight test
- * hits (brute force over all of them) in the list of each ray checked: camera rays, and rays
- * at the triangles' corners and edge midpoints. */
+ * hits (brute force over all of them) in the list of each ray checked: camera rays, rays at the
+ * triangles' corners and edge midpoints, and camera rays moved off their grid (a cell's rays,
+ * and a grid column's and row's, then spread over it, which the plan's narrowing of a span to
+ * the columns and rows whose rays its box may hold must allow for) with a band of rows left
+ * without rays. */
 static void ray_bin_lists_hold_every_triangle_a_ray_hits(void)
 {
     vkrt_scene *s = make_scene(cpu, VKRT_MODELS_DIR "/meshes/dragon_11k.obj", VKRT_BVH_BUILDER_DEFAULT);
@@ -1364,18 +1367,29 @@ static void ray_bin_lists_hold_every_triangle_a_ray_hits(void)
     const size_t camera_n = 160 * 120;
     vkrt_ray *camera = malloc(camera_n * sizeof *camera);
     CHECK(vkrt_camera_rays(cpu, NULL, 160, 120, camera, camera_n) == VKRT_OK);
+    /* Each direction moved by up to 1.5 pixels across and down (the view's pixels are some 0.007
+     * apart at unit depth), and the rays of rows 40 to 59 made invalid. */
+    vkrt_ray *moved = malloc(camera_n * sizeof *moved);
+    memcpy(moved, camera, camera_n * sizeof *moved);
+    test_rng rng = { 2026 };
+    for (size_t i = 0; i < camera_n; i++) {
+        for (int a = 0; a < 2; a++) moved[i].dir[a] += (float)(0.02 * (rng_uniform(&rng) - 0.5));
+        if (i / 160 >= 40 && i / 160 < 60) moved[i].dir[0] = NAN;
+    }
     const struct {
         const vkrt_ray *rays;
         size_t n, step;
         const char *what;
-    } sets[] = { { camera, camera_n, 3, "camera" }, { corner, corner_n, 13, "corners and edges" } };
+    } sets[] = { { camera, camera_n, 3, "camera" },
+                 { corner, corner_n, 13, "corners and edges" },
+                 { moved, camera_n, 3, "camera rays off the grid" } };
     /* The camera's lists planned first without kept scratch, then with the scratch each plan
      * leaves (the corners' plan after the camera's, the camera's again after theirs): the same
      * lists. */
     ray_bin_scratch *scratch = NULL;
     uint32_t *first_lists = NULL, first_count = 0;
-    for (int pass = 0; pass < 3; pass++) {
-        const int set = pass % 2;
+    for (int pass = 0; pass < 4; pass++) {
+        const int set = pass == 3 ? 2 : pass % 2;
         const vkrt_ray *rays = sets[set].rays;
         const uint32_t n = (uint32_t)sets[set].n;
         ray_bins bins;
@@ -1441,6 +1455,7 @@ static void ray_bin_lists_hold_every_triangle_a_ray_hits(void)
     ray_bin_scratch_destroy(&s->ctx->core, scratch);
     free(first_lists);
     free(camera);
+    free(moved);
     free(corner);
     free(pos);
     vkrt_scene_destroy(s);
