@@ -454,6 +454,22 @@ static uint64_t row_may_hit(const ray_bin_job *j, const tri_test *t, uint32_t y,
     return width >= 64 ? bits : bits & ((1ull << width) - 1);
 }
 
+/* ceil(2^16 / w) for spans w = 1 .. 64 cells wide: bit b of a span's mask lies (b * it) >> 16
+ * rows down, exactly for b < 64 (b / w is short of the next integer by 1 / w at least, the
+ * rounding adds under 64 / 2^16), without a division an entry. */
+#define SPAN_RECIP(w) ((65536u + (w) - 1u) / (w))
+#define SPAN_RECIP8(w) SPAN_RECIP(w), SPAN_RECIP(w + 1u), SPAN_RECIP(w + 2u), SPAN_RECIP(w + 3u), \
+    SPAN_RECIP(w + 4u), SPAN_RECIP(w + 5u), SPAN_RECIP(w + 6u), SPAN_RECIP(w + 7u)
+static const uint32_t span_recip[65] = { 0, SPAN_RECIP8(1u), SPAN_RECIP8(9u), SPAN_RECIP8(17u), SPAN_RECIP8(25u),
+                                         SPAN_RECIP8(33u), SPAN_RECIP8(41u), SPAN_RECIP8(49u), SPAN_RECIP8(57u) };
+
+/* The cell of bit `bit` of a span `width` cells wide, from its first cell. */
+static uint32_t span_cell(uint32_t bit, uint32_t width, uint32_t stride)
+{
+    const uint32_t dy = (bit * span_recip[width]) >> 16;
+    return dy * stride + (bit - dy * width);
+}
+
 /* Counts triangle t (test `s`) into the cells whose rays may hit it; false where the item
  * passes its budget of cell visits. */
 static bool count_triangle(ray_bin_job *j, uint32_t t, const tri_test *s, uint32_t *count, uint64_t *visited)
@@ -467,12 +483,10 @@ static bool count_triangle(ray_bin_job *j, uint32_t t, const tri_test *s, uint32
          * mesh many in one direction): the cells whose rays may hit noted for the fill (bit
          * width dy + dx), which then neither projects nor tests again. */
         uint64_t cells = 0;
-        for (uint32_t dy = 0; dy < height; dy++) {
-            uint64_t row = row_may_hit(j, s, s->y0 + dy, s->x0, s->x1);
-            cells |= row << (dy * width);
-            uint32_t *row_count = count + first + dy * g->stride;
-            for (; row; row &= row - 1) row_count[__builtin_ctzll(row)]++;
-        }
+        for (uint32_t dy = 0; dy < height; dy++) cells |= row_may_hit(j, s, s->y0 + dy, s->x0, s->x1) << (dy * width);
+        /* One loop over the span's cells, not one a row: most rows hold none. */
+        for (uint64_t left = cells; left; left &= left - 1)
+            count[first + span_cell((uint32_t)__builtin_ctzll(left), width, g->stride)]++;
         j->tri_cells[t] = cells;
         j->tri_width[t] = (uint8_t)width;
         *visited += (uint64_t)width * height;
@@ -528,8 +542,7 @@ static void tris_fill_item(void *job, uint32_t item)
         if (width) {
             /* The cells the count noted, in its order. */
             for (uint64_t cells = j->tri_cells[t]; cells; cells &= cells - 1) {
-                const uint32_t bit = (uint32_t)__builtin_ctzll(cells);
-                j->entries[at[j->tri_cell[t] + bit / width * g->stride + bit % width]++] = t;
+                j->entries[at[j->tri_cell[t] + span_cell((uint32_t)__builtin_ctzll(cells), width, g->stride)]++] = t;
             }
             continue;
         }
