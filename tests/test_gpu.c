@@ -1332,10 +1332,10 @@ static void gpu_renders_take_lists_with_the_bvh_image(void)
 /* The host's lists themselves (src/ray_bin.h), on a scene's own triangles: every slot written,
  * each list in the triangles' order without repeats, and every triangle the watertight test
  * hits (brute force over all of them) in the list of each ray checked: camera rays, rays at the
- * triangles' corners and edge midpoints, and camera rays moved off their grid (a cell's rays,
- * and a grid column's and row's, then spread over it, which the plan's narrowing of a span to
- * the columns and rows whose rays its box may hold must allow for) with a band of rows left
- * without rays. */
+ * triangles' corners and edge midpoints, and camera rays moved off their grid with a band of
+ * rows left without rays (each of a camera's cells holds one ray, whose bounds are a point: a
+ * test that took a cell's low bounds for its high ones would pass there; moved, a cell's rays
+ * spread over it, and it misses 401 hit triangles). */
 static void ray_bin_lists_hold_every_triangle_a_ray_hits(void)
 {
     vkrt_scene *s = make_scene(cpu, VKRT_MODELS_DIR "/meshes/dragon_11k.obj", VKRT_BVH_BUILDER_DEFAULT);
