@@ -300,7 +300,8 @@ vkrt_result vk_texel_buffer_create(vk_context *vk, const uint32_t *data, uint32_
     const uint32_t zero[4] = { 0 };
     const VkDeviceSize bytes = (VkDeviceSize)(texels ? texels : 1) * sizeof zero;
     vkrt_result r = texel_buffer_make(vk, bytes, VK_FORMAT_R32G32B32A32_UINT, label, out);
-    if (r == VKRT_OK) r = vk_buffer_upload(vk, &out->buffer, texels ? (const void *)data : zero, bytes);
+    if (r != VKRT_OK) return r; /* texel_buffer_make cleaned up */
+    r = vk_buffer_upload(vk, &out->buffer, texels ? (const void *)data : zero, bytes);
     if (r != VKRT_OK) vk_texel_buffer_destroy(vk, out);
     return r;
 }
