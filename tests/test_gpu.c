@@ -1335,7 +1335,8 @@ static void gpu_renders_take_lists_with_the_bvh_image(void)
  * triangles' corners and edge midpoints, and camera rays moved off their grid with a band of
  * rows left without rays (each of a camera's cells holds one ray, whose bounds are a point: a
  * test that took a cell's low bounds for its high ones would pass there; moved, a cell's rays
- * spread over it, and it misses 401 hit triangles). */
+ * spread over it, and it misses 401 hit triangles); and the same lists on any number of
+ * threads. */
 static void ray_bin_lists_hold_every_triangle_a_ray_hits(void)
 {
     vkrt_scene *s = make_scene(cpu, VKRT_MODELS_DIR "/meshes/dragon_11k.obj", VKRT_BVH_BUILDER_DEFAULT);
@@ -1453,6 +1454,26 @@ static void ray_bin_lists_hold_every_triangle_a_ray_hits(void)
     }
     CHECK_MSG(scratch != NULL, "no scratch kept");
     ray_bin_scratch_destroy(&s->ctx->core, scratch);
+    /* However many threads count the triangles, and however they share them out as they go (a
+     * pair of items takes its segment's chunks from both ends, an odd item its own; more
+     * threads than cores here), the camera's lists are the first pass's on two threads. */
+    const uint32_t thread_counts[] = { 1, 3, 5, 8 };
+    for (size_t k = 0; k < sizeof thread_counts / sizeof thread_counts[0] && first_lists; k++) {
+        ray_bins bins;
+        ray_bin_outcome outcome;
+        const ray_bin_limits limits = { .max_entries = 64u * (uint32_t)camera_n, .max_list = 1u << 20 };
+        CHECK(ray_bin_plan(&s->ctx->core, NULL, camera, (uint32_t)camera_n, s->tris, tris, &box, limits,
+                           thread_counts[k], &bins, &outcome) == VKRT_OK);
+        CHECK_MSG(outcome == RAY_BIN_BUILT, "%u threads: outcome %d", thread_counts[k], (int)outcome);
+        if (outcome != RAY_BIN_BUILT) continue;
+        uint32_t *entries = malloc((size_t)(bins.entry_count ? bins.entry_count : 1) * sizeof *entries);
+        ray_bin_fill(&bins, entries);
+        CHECK_MSG(bins.entry_count == first_count && memcmp(entries, first_lists, first_count * sizeof *entries) == 0,
+                  "%u threads: the camera's lists differ (%u entries, %u on two threads)", thread_counts[k],
+                  bins.entry_count, first_count);
+        free(entries);
+        ray_bins_destroy(&s->ctx->core, &bins);
+    }
     free(first_lists);
     free(camera);
     free(moved);
