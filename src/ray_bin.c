@@ -114,7 +114,9 @@ struct ray_bin_job {
                                   tests those again */
     uint64_t cell_budget;      /* cells the count may visit before the lists count as too long */
     atomic_uint_fast64_t visited; /* cells the count's chunks visited, those done so far */
-    atomic_bool stop;          /* an item found that the lists cannot be built: the rest stop */
+    atomic_bool stop;          /* an item found that the lists cannot be built: the rest stop
+                                  (so where a corner lies behind the origin and the budget runs
+                                  out as well, which the plan reports depends on the threads) */
     uint32_t tri_chunk;        /* triangles a chunk of the count (tri_segment_first) */
     atomic_uint *segment_taken; /* per segment: its chunks taken so far */
     uint32_t *tri_first, *tri_end; /* per triangle item: the triangles it counted (and fills) */
