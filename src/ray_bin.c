@@ -1,8 +1,8 @@
 /* Triangle lists for rays that share one origin: see ray_bin.h. The plan:
  *   - serially, the shared origin from the first rays, and the axis from a sample of them;
- *   1. rays: the scene box test, the origin check, the angle check, each one's projection
- *      (a, b) onto the plane at distance 1 along the axis, and their bounds, which the grid
- *      spans;
+ *   1. rays: each one's projection (a, b) onto the plane at distance 1 along the axis, whether
+ *      it may enter the scene's box (within the box's projection, or the box test), the origin
+ *      check, the angle check, and their bounds, which the grid spans;
  *   2. rays: each one's grid cell;
  *   3. cells, an item a range of them: each cell's bounds of its rays' projections;
  *   4. triangles, four at a time: each one's projection, widened, and a count in every cell
@@ -21,6 +21,7 @@
 
 #include "cpu_trace.h"
 #include "float4.h"
+#include "ray4.h"
 #include "ray_cull.h"
 #include "work_pool.h"
 
@@ -96,6 +97,8 @@ struct ray_bin_job {
     uint32_t items;            /* of the cell and triangle passes: the pool's threads */
     double min_cos2;           /* the square of the smallest cosine of a ray's angle to the axis */
     frame fr;
+    /* The box's projection's bounds, widened (box_projection): a min, a max, b min, b max. */
+    float4 box_rect[4];
     grid g;
     ray_item_result *ray_results;
     float *ray_ab;             /* 2 a ray; NaN for a ray that gets no cell */
@@ -160,17 +163,17 @@ static uint32_t ray_item_end(const ray_bin_job *j, uint32_t item)
     return end < j->ray_count ? (uint32_t)end : j->ray_count;
 }
 
-/* Four rays at a time in float4: the box test that keeps rays from the device (ray_cull.h; it
- * turns away the rays that are not valid too), then for those that pass the origin check, the
- * angle check and the projection. Float rounding of a projection is a few ulps of it, as of the
- * triangles' corners: the widening's 64 hold both. */
+/* Four rays at a time in float4: the projection, the test that keeps rays that cannot enter
+ * the scene's box from the device, and for those that may, the origin check and the angle
+ * check. Float rounding of a projection is a few ulps of it, as of the triangles' corners: the
+ * widening's 64 hold both. */
 static void rays_project_item(void *job, uint32_t item)
 {
     ray_bin_job *j = job;
     const frame *fr = &j->fr;
     float4 lo_a = f4_set1(INFINITY), hi_a = f4_set1(-INFINITY), lo_b = lo_a, hi_b = hi_a;
     ray_item_result res = { .valid = 0 };
-    const float4 min_cos2 = f4_set1((float)j->min_cos2), zero = f4_set1(0.0f);
+    const float4 min_cos2 = f4_set1((float)j->min_cos2), zero = f4_set1(0.0f), inf = f4_set1(INFINITY);
     for (uint32_t i = item * RAY_ITEM, end = ray_item_end(j, item); i < end; i += 4) {
         const uint32_t lanes = end - i < 4 ? end - i : 4;
         vkrt_ray tail[4];
@@ -179,26 +182,34 @@ static void rays_project_item(void *job, uint32_t item)
             for (uint32_t k = 0; k < 4; k++) tail[k] = job_ray(j->rays, j->camera, k < lanes ? i + k : i);
             r = tail;
         }
-        /* Only rays that may enter the scene's box get a cell: the grid spans them alone, and the
-         * rays that miss the box (37% of the standard view's) take none. */
-        const unsigned enters = ray_cull_test4(r, j->box) & ((1u << lanes) - 1);
-        float4 rows[4];
-        for (uint32_t k = 0; k < 4; k++) {
-            rows[k] = f4_load(r[k].dir); /* x, y, z, tmax */
-            res.origin_differs |= (enters >> k & 1) && (r[k].origin[0] != fr->o[0] || r[k].origin[1] != fr->o[1] ||
-                                                         r[k].origin[2] != fr->o[2]);
-        }
-        f4_transpose(rows);
-        const float4 dx = rows[0], dy = rows[1], dz = rows[2];
+        float4 o[4], d[4];
+        ray4_load(r, o, d);
+        const float4 dx = d[0], dy = d[1], dz = d[2];
         const float4 z = f4_add(f4_add(f4_mul(dx, fr->f4[0]), f4_mul(dy, fr->f4[1])), f4_mul(dz, fr->f4[2]));
         const float4 len2 = f4_add(f4_add(f4_mul(dx, dx), f4_mul(dy, dy)), f4_mul(dz, dz));
         /* cos of the angle to the axis >= min_cos, squared: no square root. */
         const unsigned near_axis = f4_bits(f4_and(f4_gt(z, zero), f4_ge(f4_mul(z, z), f4_mul(min_cos2, len2))));
-        res.wide_angle |= (enters & ~near_axis) != 0;
-        const unsigned keep = enters & near_axis;
         const float4 inv_z = f4_div(f4_set1(1.0f), z);
         const float4 a = f4_mul(f4_add(f4_add(f4_mul(dx, fr->r4[0]), f4_mul(dy, fr->r4[1])), f4_mul(dz, fr->r4[2])), inv_z);
         const float4 b = f4_mul(f4_add(f4_add(f4_mul(dx, fr->u4[0]), f4_mul(dy, fr->u4[1])), f4_mul(dz, fr->u4[2])), inv_z);
+        /* Only rays that may enter the scene's box get a cell: the grid spans them alone, and the
+         * rays that miss the box (37% of the standard view's) take none. A ray from the shared
+         * origin with a finite direction ahead of it may enter the box only where its projection
+         * lies within the box's (box_projection); the box test (ray_cull.h, which turns away the
+         * rays that are not valid too) answers the others, and the rays within it at too wide
+         * an angle, which would turn the lists down. A ray that gets a cell without entering the
+         * box only costs its list's tests, which find what the box test would have: nothing. */
+        const unsigned same = f4_bits(f4_and(f4_and(f4_eq(o[0], fr->o4[0]), f4_eq(o[1], fr->o4[1])), f4_eq(o[2], fr->o4[2])));
+        const unsigned ahead = f4_bits(f4_and(f4_and(f4_lt(f4_abs(dx), inf), f4_lt(f4_abs(dy), inf)),
+                                              f4_and(f4_lt(f4_abs(dz), inf), f4_gt(z, zero))));
+        const unsigned within = f4_bits(f4_and(f4_and(f4_ge(a, j->box_rect[0]), f4_le(a, j->box_rect[1])),
+                                               f4_and(f4_ge(b, j->box_rect[2]), f4_le(b, j->box_rect[3]))));
+        const unsigned lane_mask = (1u << lanes) - 1, quick = same & ahead;
+        const unsigned full = lane_mask & (~quick | (within & ~near_axis));
+        const unsigned enters = ((quick & within & ~full) | (full ? ray_cull_test4(r, j->box) & full : 0u)) & lane_mask;
+        res.origin_differs |= (enters & ~same) != 0;
+        res.wide_angle |= (enters & ~near_axis) != 0;
+        const unsigned keep = enters & near_axis;
         const float4 kept = f4_mask(keep);
         const float4 nan = f4_set1(NAN);
         float av[4], bv[4];
@@ -700,6 +711,29 @@ static bool box_in_front(const frame *fr, const vkrt_gpu_node *box)
     return true;
 }
 
+/* The bounds of the box's projection (its eight corners', in double: every corner lies ahead of
+ * the origin, box_in_front), widened by far more than the rays' float projections can be off
+ * by (a few ulps of the coordinates' size, WIDEN_ULPS), or than the box test's own tolerance
+ * lets a ray that just misses the box pass. */
+static void box_projection(const frame *fr, const vkrt_gpu_node *box, float4 rect[4])
+{
+    const float lo[3] = { box->bmin.x, box->bmin.y, box->bmin.z }, hi[3] = { box->bmax.x, box->bmax.y, box->bmax.z };
+    double bounds[4] = { INFINITY, -INFINITY, INFINITY, -INFINITY }, reach = 1.0;
+    for (int corner = 0; corner < 8; corner++) {
+        double p[3];
+        for (int k = 0; k < 3; k++) p[k] = (double)((corner >> k) & 1 ? hi[k] : lo[k]) - fr->o[k];
+        const double z = dot(p, fr->f), a = dot(p, fr->r) / z, b = dot(p, fr->u) / z;
+        bounds[0] = min_d(bounds[0], a);
+        bounds[1] = max_d(bounds[1], a);
+        bounds[2] = min_d(bounds[2], b);
+        bounds[3] = max_d(bounds[3], b);
+        reach = max_d(reach, max_d(abs_d(a), abs_d(b)));
+    }
+    /* A projection's error grows with 1 + a^2 + b^2, as the triangles' widening does. */
+    const double margin = 0x1p-14 * reach * reach;
+    for (int k = 0; k < 4; k++) rect[k] = f4_set1((float)(bounds[k] + (k % 2 ? margin : -margin)));
+}
+
 /* A grid of about one square cell a ray over the rays' projections. */
 static grid make_grid(const double bounds[4], uint32_t rays)
 {
@@ -766,6 +800,7 @@ static ray_bin_outcome plan(core *c, ray_bin_job *j, ray_bin_limits limits, ray_
 {
     if (!make_frame(j->rays, j->camera, j->ray_count, &j->fr)) return RAY_BIN_WIDE_ANGLE;
     if (!box_in_front(&j->fr, j->box)) return RAY_BIN_BEHIND;
+    box_projection(&j->fr, j->box, j->box_rect);
     const double min_cos = cos(RAY_BIN_MAX_ANGLE_DEG * (3.14159265358979323846 / 180.0));
     j->min_cos2 = min_cos * min_cos;
     const uint32_t ray_items = core_div_up(j->ray_count, RAY_ITEM);

@@ -12,6 +12,7 @@
 #include "cpu_trace.h"
 #include "huge_pages.h"
 #include "ray_bin.h"
+#include "ray_cull.h"
 #include "ray_offset.h"
 #include "shaders_embedded.h"
 #include "trace_fixtures.h"
@@ -977,6 +978,92 @@ static void ray_bin_says_why_rays_do_not_suit(void)
     vkrt_scene_destroy(s);
 }
 
+/* n rays (a multiple of 4) from `eye`: a third aimed at points all but on the surface of `box`
+ * (its corners, edges and faces, each moved by 0 to 1e-3 in a random direction), a third at
+ * points 0.05 to 0.3 off its faces, a third within it; an eighth of them short, a few with a
+ * NaN tmin or tmax, or a tmin past the box. */
+static vkrt_ray *rays_about_a_box(const float eye[3], const vkrt_gpu_node *box, size_t n, uint64_t seed)
+{
+    vkrt_ray *rays = calloc(n, sizeof *rays);
+    if (!rays) abort();
+    test_rng rng = { seed };
+    const float lo[3] = { box->bmin.x, box->bmin.y, box->bmin.z }, hi[3] = { box->bmax.x, box->bmax.y, box->bmax.z };
+    const double offsets[] = { 0.0, 1e-7, 1e-6, 1e-5, 1e-4, 1e-3 };
+    for (size_t i = 0; i < n; i++) {
+        double target[3];
+        const int kind = (int)(i % 3), axis = (int)(rng_uniform(&rng) * 3.0) % 3, side = rng_uniform(&rng) < 0.5;
+        for (int a = 0; a < 3; a++) {
+            double u = rng_uniform(&rng);
+            if (kind == 0 && rng_uniform(&rng) < 0.4) u = u < 0.5 ? 0.0 : 1.0; /* an edge or a corner */
+            target[a] = lo[a] + u * (hi[a] - lo[a]);
+        }
+        if (kind < 2) target[axis] = side ? hi[axis] : lo[axis];
+        if (kind == 0) {
+            const double off = offsets[(int)(rng_uniform(&rng) * 6.0) % 6];
+            for (int a = 0; a < 3; a++) target[a] += off * (2.0 * rng_uniform(&rng) - 1.0);
+        } else if (kind == 1) {
+            target[axis] += (side ? 1.0 : -1.0) * (0.05 + 0.25 * rng_uniform(&rng));
+        }
+        for (int a = 0; a < 3; a++) {
+            rays[i].origin[a] = eye[a];
+            rays[i].dir[a] = (float)(target[a] - eye[a]);
+        }
+        const double v = rng_uniform(&rng);
+        if (v < 0.125) rays[i].tmax = (float)(0.1 + 0.5 * rng_uniform(&rng));
+        else if (v < 0.15) rays[i].tmin = NAN;
+        else if (v < 0.175) rays[i].tmax = NAN;
+        else if (v < 0.2) rays[i].tmin = 5.0f;
+    }
+    return rays;
+}
+
+/* A ray from the shared origin gets a cell wherever the box test lets it into the scene's box
+ * (ray_cull_test4, as the BVH's first step), however near the box's edges it passes; and where
+ * it passes well beside the box (here a view of one face, whose projection is the box's), none. */
+static void ray_bin_gives_a_cell_to_every_ray_the_box_test_lets_in(void)
+{
+    vkrt_scene *s = make_scene(cpu, VKRT_MODELS_DIR "/meshes/dragon_11k.obj", VKRT_BVH_BUILDER_DEFAULT);
+    if (!s) return;
+    const vkrt_gpu_node box = { .bmin = { -0.5f, -0.5f, -0.5f }, .bmax = { 0.5f, 0.5f, 0.5f } };
+    const vkrt_gpu_node grown = { .bmin = { -0.55f, -0.55f, -0.55f }, .bmax = { 0.55f, 0.55f, 0.55f } };
+    const float eyes[][3] = { { 0.0f, 0.0f, 1.5f }, { -1.1f, 0.7f, 0.3f }, { 0.9f, 0.4f, -0.8f }, { 0.3f, -2.5f, 0.2f } };
+    const size_t n = 6000;
+    for (size_t e = 0; e < sizeof eyes / sizeof eyes[0]; e++) {
+        vkrt_ray *rays = rays_about_a_box(eyes[e], &box, n, 100 + e);
+        ray_bins bins;
+        ray_bin_outcome outcome;
+        CHECK(ray_bin_plan(&s->ctx->core, NULL, rays, (uint32_t)n, s->tris, s->bvh.tri_count, &box,
+                           (ray_bin_limits){ UINT32_MAX, UINT32_MAX }, 2, &bins, &outcome) == VKRT_OK);
+        CHECK_MSG(outcome == RAY_BIN_BUILT, "eye %zu: outcome %d", e, (int)outcome);
+        if (outcome == RAY_BIN_BUILT) {
+            size_t let_in = 0, without = 0, beside = 0, beside_with = 0;
+            for (size_t i = 0; i < n; i += 4) {
+                /* Beside the box whatever the rays' bounds: */
+                vkrt_ray whole[4];
+                memcpy(whole, &rays[i], sizeof whole);
+                for (int l = 0; l < 4; l++) whole[l].tmin = whole[l].tmax = 0.0f;
+                const unsigned in = ray_cull_test4(&rays[i], &box), near = ray_cull_test4(whole, &grown);
+                for (unsigned l = 0; l < 4; l++) {
+                    const bool cell = bins.ray_cell[i + l] != RAY_BIN_NO_CELL;
+                    let_in += in >> l & 1;
+                    without += (in >> l & 1) && !cell;
+                    beside += !(near >> l & 1);
+                    beside_with += !(near >> l & 1) && cell;
+                }
+            }
+            fprintf(stderr, "  eye %zu: %zu of %zu rays let into the box, %zu pass beside it\n", e, let_in, n, beside);
+            CHECK_MSG(let_in > n / 4 && without == 0, "eye %zu: %zu of %zu rays the box test lets in have no cell", e,
+                      without, let_in);
+            if (e == 0)
+                CHECK_MSG(beside > n / 40 && beside_with == 0, "eye 0: %zu of %zu rays well beside the box have a cell",
+                          beside_with, beside);
+        }
+        ray_bins_destroy(&s->ctx->core, &bins);
+        free(rays);
+    }
+    vkrt_scene_destroy(s);
+}
+
 /* ray_bin_plan_camera, which makes a camera's rays as it reads them, lists exactly as
  * ray_bin_plan does from the rays vkrt_camera_rays makes: the same cells, lists and entries. */
 static void ray_bin_camera_plan_lists_as_the_camera_rays_do(void)
@@ -1152,6 +1239,16 @@ static void gpu_rays_sharing_an_origin_take_lists_with_the_bvh_hits(void)
         char what[64];
         snprintf(what, sizeof what, "camera %zu", c);
         check_binned(s, NULL, rays, n, true, what);
+        /* The camera's rays beside rays about the scene's box from the same eye: by its edges, off
+         * its faces, short, with NaN bounds. */
+        if (c < 3) {
+            const size_t about = 12000;
+            vkrt_ray *mixed = rays_about_a_box(rays[0].origin, &s->gpu.root, n + about, 300 + c);
+            memcpy(mixed, rays, n * sizeof *rays);
+            snprintf(what, sizeof what, "camera %zu and rays about the box", c);
+            check_binned(s, NULL, mixed, n + about, true, what);
+            free(mixed);
+        }
     }
     vkrt_scene_stats st;
     CHECK(vkrt_scene_stats_get(s, &st) == VKRT_OK);
@@ -2385,6 +2482,7 @@ int main(void)
     RUN(gpu_trace_rays_answer_rays_missing_the_scene_box_on_the_host);
     RUN(ray_bin_lists_hold_every_triangle_a_ray_hits);
     RUN(ray_bin_says_why_rays_do_not_suit);
+    RUN(ray_bin_gives_a_cell_to_every_ray_the_box_test_lets_in);
     RUN(ray_bin_camera_plan_lists_as_the_camera_rays_do);
     RUN(gpu_rays_sharing_an_origin_take_lists_with_the_bvh_hits);
     RUN(gpu_renders_take_lists_with_the_bvh_image);
