@@ -1018,8 +1018,9 @@ static vkrt_ray *rays_about_a_box(const float eye[3], const vkrt_gpu_node *box, 
 }
 
 /* A ray from the shared origin gets a cell wherever the box test lets it into the scene's box
- * (ray_cull_test4, as the BVH's first step), however near the box's edges it passes; and where
- * it passes well beside the box (here a view of one face, whose projection is the box's), none. */
+ * (ray_cull_test4, as the BVH's first step), however near the box's edges it passes and whatever
+ * the box's size and place; and where it passes well beside the box (here a view of one face,
+ * whose projection is the box's), none. */
 static void ray_bin_gives_a_cell_to_every_ray_the_box_test_lets_in(void)
 {
     vkrt_scene *s = make_scene(cpu, VKRT_MODELS_DIR "/meshes/dragon_11k.obj", VKRT_BVH_BUILDER_DEFAULT);
@@ -1061,6 +1062,57 @@ static void ray_bin_gives_a_cell_to_every_ray_the_box_test_lets_in(void)
         ray_bins_destroy(&s->ctx->core, &bins);
         free(rays);
     }
+    /* Boxes from 1e-6 to 1e6 across, up to 1e6 from the world's origin, eyes from just outside
+     * them (the box all but reaching the eye's plane, where the projection's bounds grow widest)
+     * to far off, a few triangles in each. */
+    test_rng rng = { 4242 };
+    size_t planned = 0, let_in = 0, without = 0;
+    for (int k = 0; k < 200; k++) {
+        const double size = pow(10.0, 12.0 * rng_uniform(&rng) - 6.0);
+        float lo[3], hi[3], eye[3];
+        for (int a = 0; a < 3; a++) {
+            const double at = rng_uniform(&rng) < 0.5 ? 0.0 : (2.0 * rng_uniform(&rng) - 1.0) * pow(10.0, 6.0 * rng_uniform(&rng));
+            lo[a] = (float)(at - size * (0.01 + rng_uniform(&rng)));
+            hi[a] = (float)(at + size * (0.01 + rng_uniform(&rng)));
+        }
+        double dir[3];
+        rng_unit_vector(&rng, dir);
+        const double reach = size * (k % 2 ? 1.0 + 0.6 * rng_uniform(&rng) : 1.5 + 10.0 * rng_uniform(&rng));
+        for (int a = 0; a < 3; a++) eye[a] = (float)(0.5 * ((double)lo[a] + hi[a]) + dir[a] * reach);
+        const vkrt_gpu_node b = { .bmin = { lo[0], lo[1], lo[2] }, .bmax = { hi[0], hi[1], hi[2] } };
+        vkrt_gpu_tri tris[16];
+        memset(tris, 0, sizeof tris);
+        for (int t = 0; t < 16; t++) {
+            vkrt_float3 *v[3] = { &tris[t].v0, &tris[t].v1, &tris[t].v2 };
+            for (int c = 0; c < 3; c++) {
+                v[c]->x = lo[0] + (float)rng_uniform(&rng) * (hi[0] - lo[0]);
+                v[c]->y = lo[1] + (float)rng_uniform(&rng) * (hi[1] - lo[1]);
+                v[c]->z = lo[2] + (float)rng_uniform(&rng) * (hi[2] - lo[2]);
+            }
+        }
+        const size_t m = 1024;
+        vkrt_ray *rays = rays_about_a_box(eye, &b, m, 500 + (uint64_t)k);
+        ray_bins bins;
+        ray_bin_outcome outcome;
+        CHECK(ray_bin_plan(&s->ctx->core, NULL, rays, (uint32_t)m, tris, 16, &b, (ray_bin_limits){ UINT32_MAX, UINT32_MAX },
+                           2, &bins, &outcome) == VKRT_OK);
+        if (outcome == RAY_BIN_BUILT) {
+            planned++;
+            for (size_t i = 0; i < m; i += 4) {
+                const unsigned in = ray_cull_test4(&rays[i], &b);
+                for (unsigned l = 0; l < 4; l++) {
+                    let_in += in >> l & 1;
+                    without += (in >> l & 1) && bins.ray_cell[i + l] == RAY_BIN_NO_CELL;
+                }
+            }
+        }
+        ray_bins_destroy(&s->ctx->core, &bins);
+        free(rays);
+    }
+    fprintf(stderr, "  boxes of every size: %zu of 200 planned, %zu rays let in\n", planned, let_in);
+    CHECK_MSG(planned > 150 && let_in > planned * 500 && without == 0,
+              "boxes of every size: %zu of %zu rays the box test lets in have no cell (%zu planned)", without, let_in,
+              planned);
     vkrt_scene_destroy(s);
 }
 
