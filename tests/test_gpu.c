@@ -979,9 +979,9 @@ static void ray_bin_says_why_rays_do_not_suit(void)
 }
 
 /* n rays (a multiple of 4) from `eye`: a third aimed at points all but on the surface of `box`
- * (its corners, edges and faces, each moved by 0 to 1e-3 in a random direction), a third at
- * points 0.05 to 0.3 off its faces, a third within it; an eighth of them short, a few with a
- * NaN tmin or tmax, or a tmin past the box. */
+ * (its corners, edges and faces, each moved by 0 to 1e-3 of its largest side in a random
+ * direction), a third at points 0.05 to 0.3 of that off its faces, a third within it; an eighth
+ * of them short, a few with a NaN tmin or tmax, or a tmin past the box. */
 static vkrt_ray *rays_about_a_box(const float eye[3], const vkrt_gpu_node *box, size_t n, uint64_t seed)
 {
     vkrt_ray *rays = calloc(n, sizeof *rays);
@@ -989,6 +989,8 @@ static vkrt_ray *rays_about_a_box(const float eye[3], const vkrt_gpu_node *box, 
     test_rng rng = { seed };
     const float lo[3] = { box->bmin.x, box->bmin.y, box->bmin.z }, hi[3] = { box->bmax.x, box->bmax.y, box->bmax.z };
     const double offsets[] = { 0.0, 1e-7, 1e-6, 1e-5, 1e-4, 1e-3 };
+    double side_max = 0.0;
+    for (int a = 0; a < 3; a++) side_max = fmax(side_max, (double)hi[a] - lo[a]);
     for (size_t i = 0; i < n; i++) {
         double target[3];
         const int kind = (int)(i % 3), axis = (int)(rng_uniform(&rng) * 3.0) % 3, side = rng_uniform(&rng) < 0.5;
@@ -1000,9 +1002,9 @@ static vkrt_ray *rays_about_a_box(const float eye[3], const vkrt_gpu_node *box, 
         if (kind < 2) target[axis] = side ? hi[axis] : lo[axis];
         if (kind == 0) {
             const double off = offsets[(int)(rng_uniform(&rng) * 6.0) % 6];
-            for (int a = 0; a < 3; a++) target[a] += off * (2.0 * rng_uniform(&rng) - 1.0);
+            for (int a = 0; a < 3; a++) target[a] += off * side_max * (2.0 * rng_uniform(&rng) - 1.0);
         } else if (kind == 1) {
-            target[axis] += (side ? 1.0 : -1.0) * (0.05 + 0.25 * rng_uniform(&rng));
+            target[axis] += (side ? 1.0 : -1.0) * (0.05 + 0.25 * rng_uniform(&rng)) * side_max;
         }
         for (int a = 0; a < 3; a++) {
             rays[i].origin[a] = eye[a];
