@@ -699,30 +699,21 @@ static bool make_frame(const vkrt_ray *rays, const vkrt_gpu_push *camera, uint32
     return true;
 }
 
-/* Every corner of the box in front of the origin's plane (and so every triangle within it). */
-static bool box_in_front(const frame *fr, const vkrt_gpu_node *box)
-{
-    const float lo[3] = { box->bmin.x, box->bmin.y, box->bmin.z }, hi[3] = { box->bmax.x, box->bmax.y, box->bmax.z };
-    for (int corner = 0; corner < 8; corner++) {
-        double p[3];
-        for (int k = 0; k < 3; k++) p[k] = (double)((corner >> k) & 1 ? hi[k] : lo[k]) - fr->o[k];
-        if (!(dot(p, fr->f) > 0.0)) return false;
-    }
-    return true;
-}
-
-/* The bounds of the box's projection (its eight corners', in double: every corner lies ahead of
- * the origin, box_in_front), widened by far more than the rays' float projections can be off
- * by (a few ulps of the coordinates' size, WIDEN_ULPS), or than the box test's own tolerance
- * lets a ray that just misses the box pass. */
-static void box_projection(const frame *fr, const vkrt_gpu_node *box, float4 rect[4])
+/* Whether every corner of the box lies in front of the origin's plane (and so every triangle
+ * within it); if so, the bounds of the box's projection (its eight corners', in double), widened
+ * by far more than the rays' float projections can be off by (a few ulps of the coordinates'
+ * size, WIDEN_ULPS), or than the box test's own tolerance lets a ray that just misses the box
+ * pass. */
+static bool box_projection(const frame *fr, const vkrt_gpu_node *box, float4 rect[4])
 {
     const float lo[3] = { box->bmin.x, box->bmin.y, box->bmin.z }, hi[3] = { box->bmax.x, box->bmax.y, box->bmax.z };
     double bounds[4] = { INFINITY, -INFINITY, INFINITY, -INFINITY }, reach = 1.0;
     for (int corner = 0; corner < 8; corner++) {
         double p[3];
         for (int k = 0; k < 3; k++) p[k] = (double)((corner >> k) & 1 ? hi[k] : lo[k]) - fr->o[k];
-        const double z = dot(p, fr->f), a = dot(p, fr->r) / z, b = dot(p, fr->u) / z;
+        const double z = dot(p, fr->f);
+        if (!(z > 0.0)) return false;
+        const double a = dot(p, fr->r) / z, b = dot(p, fr->u) / z;
         bounds[0] = min_d(bounds[0], a);
         bounds[1] = max_d(bounds[1], a);
         bounds[2] = min_d(bounds[2], b);
@@ -732,6 +723,7 @@ static void box_projection(const frame *fr, const vkrt_gpu_node *box, float4 rec
     /* A projection's error grows with 1 + a^2 + b^2, as the triangles' widening does. */
     const double margin = 0x1p-14 * reach * reach;
     for (int k = 0; k < 4; k++) rect[k] = f4_set1((float)(bounds[k] + (k % 2 ? margin : -margin)));
+    return true;
 }
 
 /* A grid of about one square cell a ray over the rays' projections. */
@@ -799,8 +791,7 @@ static void job_destroy(core *c, ray_bin_job *j)
 static ray_bin_outcome plan(core *c, ray_bin_job *j, ray_bin_limits limits, ray_bins *out, bool *ok)
 {
     if (!make_frame(j->rays, j->camera, j->ray_count, &j->fr)) return RAY_BIN_WIDE_ANGLE;
-    if (!box_in_front(&j->fr, j->box)) return RAY_BIN_BEHIND;
-    box_projection(&j->fr, j->box, j->box_rect);
+    if (!box_projection(&j->fr, j->box, j->box_rect)) return RAY_BIN_BEHIND;
     const double min_cos = cos(RAY_BIN_MAX_ANGLE_DEG * (3.14159265358979323846 / 180.0));
     j->min_cos2 = min_cos * min_cos;
     const uint32_t ray_items = core_div_up(j->ray_count, RAY_ITEM);
