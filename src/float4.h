@@ -35,6 +35,8 @@ static inline float4 f4_xyz(float4 a)
 }
 /* (int32_t)a per lane; a must be in int32_t range (and not NaN). */
 static inline void f4_truncate(float4 a, int32_t *out) { _mm_storeu_si128((__m128i *)(void *)out, _mm_cvttps_epi32(a)); }
+/* Each lane rounded toward zero, as a float; lanes within +-2^31 only. */
+static inline float4 f4_trunc(float4 a) { return _mm_cvtepi32_ps(_mm_cvttps_epi32(a)); }
 /* Lanes (y, z, x, w) of a. */
 static inline float4 f4_yzxw(float4 a) { return _mm_shuffle_ps(a, a, _MM_SHUFFLE(3, 0, 2, 1)); }
 static inline float f4_x(float4 a) { return _mm_cvtss_f32(a); }
@@ -126,6 +128,11 @@ static inline float4 f4_xyz(float4 a)
 static inline void f4_truncate(float4 a, int32_t *out)
 {
     for (int k = 0; k < 4; k++) out[k] = (int32_t)a.v[k];
+}
+static inline float4 f4_trunc(float4 a)
+{
+    for (int k = 0; k < 4; k++) a.v[k] = (float)(int32_t)a.v[k];
+    return a;
 }
 static inline float4 f4_yzxw(float4 a) { return (float4){ { a.v[1], a.v[2], a.v[0], a.v[3] } }; }
 static inline float f4_x(float4 a) { return a.v[0]; }

@@ -2,12 +2,15 @@
  *   - serially, the shared origin from the first rays, and the axis from a sample of them;
  *   1. rays: each one's projection (a, b) onto the plane at distance 1 along the axis, whether
  *      it may enter the scene's box (within the box's projection, or the box test), the origin
- *      check, the angle check, and their bounds, which the grid spans;
- *   2. rays: each one's grid cell;
+ *      check, the angle check, and their bounds, which the grid spans; in one item of
+ *      STEP_SAMPLE, the least steps between rays in turn: where the rays lie on a lattice (a
+ *      camera's pixel centres), the grid has a cell a lattice point (lattice_grid);
+ *   2. rays: each one's grid cell, and where in their cells the rays lie;
  *   3. cells, an item a range of them: each cell's bounds of its rays' projections;
- *   4. triangles, four at a time: each one's projection, widened, and a count in every cell
- *      whose rays' bounds its box and edges may hold (each item its own counters, and its own
- *      range of triangles, taken a chunk at a time: tri_segment_first);
+ *   4. triangles, four at a time: each one's projection, widened, the cells its box may reach
+ *      by where the rays lie in theirs (none for a triangle between a lattice's points), and a
+ *      count in every cell whose rays' bounds its box and edges may hold (each item its own
+ *      counters, and its own range of triangles, taken a chunk at a time: tri_segment_first);
  *   - the counts become each item's write positions (a scan, each item a range of cells);
  * and ray_bin_fill:
  *   5. triangles: each entry written at its position, in the cells the count noted (a triangle
@@ -57,6 +60,11 @@ typedef struct grid {
 typedef struct ray_item_result {
     double bounds[4]; /* a min, a max, b min, b max */
     uint32_t valid;
+    float step[2]; /* the least |difference| of a and of b past their rounding between rays in
+                      turn */
+    float offset[4]; /* of the rays' cells pass: where in their cells the rays lie, in cells (a
+                        min, a max, b min, b max of c - x of rays_cell4's c and column x, and of
+                        b's c and row) */
     bool origin_differs, wide_angle;
 } ray_item_result;
 
@@ -100,6 +108,11 @@ struct ray_bin_job {
     /* The box's projection's bounds, widened (box_projection): a min, a max, b min, b max. */
     float4 box_rect[4];
     grid g;
+    /* The least and greatest offset of any ray within its cell, in cells (ray_item_result's):
+     * a box reaches a cell's rays only where it reaches that part of the cell. On a lattice of
+     * rays (lattice_grid) every ray lies at its cell's centre, and a small triangle between
+     * them spans no cell. */
+    float offset_min[2], offset_max[2];
     ray_item_result *ray_results;
     float *ray_ab;             /* 2 a ray; NaN for a ray that gets no cell */
     uint32_t *ray_cell;
@@ -163,6 +176,32 @@ static uint32_t ray_item_end(const ray_bin_job *j, uint32_t item)
     return end < j->ray_count ? (uint32_t)end : j->ray_count;
 }
 
+/* The rays' lattice steps (lattice_grid) are sought in one ray item of STEP_SAMPLE, rows of a
+ * camera's rays enough. */
+enum { STEP_SAMPLE = 8 };
+
+/* Four rays' (a and b, NaN where they got no cell; those of `keep`) differences from the last
+ * ray before each that got a cell (last[], carried on), folded into steps[] where they pass
+ * the projections' rounding (some ulps of 1 + |a| + |b|, here 2^-14 of it): rays of one row or
+ * column of a lattice differ by that alone. */
+static void lattice_steps4(const float av[4], const float bv[4], unsigned keep, float last[2], float4 steps[2])
+{
+    float before[2][4];
+    for (uint32_t k = 0; k < 4; k++) {
+        before[0][k] = last[0];
+        before[1][k] = last[1];
+        last[0] = keep >> k & 1u ? av[k] : last[0];
+        last[1] = keep >> k & 1u ? bv[k] : last[1];
+    }
+    const float *now[2] = { av, bv };
+    for (int axis = 0; axis < 2; axis++) {
+        const float4 v = f4_load(now[axis]), p = f4_load(before[axis]);
+        const float4 d = f4_abs(f4_sub(v, p));
+        const float4 noise = f4_mul(f4_set1(0x1p-14f), f4_add(f4_set1(1.0f), f4_add(f4_abs(v), f4_abs(p))));
+        steps[axis] = f4_min(steps[axis], f4_select(f4_gt(d, noise), d, f4_set1(INFINITY)));
+    }
+}
+
 /* Four rays at a time in float4: the projection, the test that keeps rays that cannot enter
  * the scene's box from the device, and for those that may, the origin check and the angle
  * check. Float rounding of a projection is a few ulps of it, as of the triangles' corners: the
@@ -173,6 +212,8 @@ static void rays_project_item(void *job, uint32_t item)
     const frame *fr = &j->fr;
     float4 lo_a = f4_set1(INFINITY), hi_a = f4_set1(-INFINITY), lo_b = lo_a, hi_b = hi_a;
     ray_item_result res = { .valid = 0 };
+    float last[2] = { NAN, NAN };
+    float4 steps[2] = { f4_set1(INFINITY), f4_set1(INFINITY) };
     const float4 min_cos2 = f4_set1((float)j->min_cos2), zero = f4_set1(0.0f), inf = f4_set1(INFINITY);
     for (uint32_t i = item * RAY_ITEM, end = ray_item_end(j, item); i < end; i += 4) {
         const uint32_t lanes = end - i < 4 ? end - i : 4;
@@ -219,6 +260,7 @@ static void rays_project_item(void *job, uint32_t item)
             j->ray_ab[2 * (i + k)] = av[k];
             j->ray_ab[2 * (i + k) + 1] = bv[k];
         }
+        if (item % STEP_SAMPLE == 0) lattice_steps4(av, bv, keep, last, steps);
         lo_a = f4_min(lo_a, f4_select(kept, a, f4_set1(INFINITY)));
         hi_a = f4_max(hi_a, f4_select(kept, a, f4_set1(-INFINITY)));
         lo_b = f4_min(lo_b, f4_select(kept, b, f4_set1(INFINITY)));
@@ -238,28 +280,62 @@ static void rays_project_item(void *job, uint32_t item)
         res.bounds[2] = min_d(res.bounds[2], lanes4[2][k]);
         res.bounds[3] = max_d(res.bounds[3], lanes4[3][k]);
     }
+    res.step[0] = f4_min_lane(steps[0]);
+    res.step[1] = f4_min_lane(steps[1]);
     j->ray_results[item] = res;
 }
 
-/* The cell column or row of a projected coordinate, clamped to the grid: monotonic in x, so a
- * box's cells from its ends' cells hold every point's within it. */
-static uint32_t cell_of(float x, float x0, float scale, uint32_t cells)
+/* Four rays' cells into cell[0], cell[step], cell[2 step] and cell[3 step]: of c = (a - a0) sa
+ * its column, of b's its row, clamped to the grid (truncation is floor from 0 up; MAXPS gives
+ * 0 for a NaN, never a conversion of NaN to an integer: a ray without a cell has NaN, and gets
+ * RAY_BIN_NO_CELL). Monotonic in a and b, so a box's cells from its ends' cells hold every
+ * point's within it. And where in its cell each ray lies, folded into lo and hi (a, b): c less
+ * the column or row, exactly (c lies in [x, 2x], Sterbenz, or x is 0). */
+static void rays_cell4(const grid *g, float4 a, float4 b, uint32_t *cell, uint32_t step, float4 lo[2], float4 hi[2])
 {
-    const float c = (x - x0) * scale;
-    /* Truncation is floor from 0 up. A NaN (a corner all but on the origin's plane can make
-     * infinities of a box) counts as 0, never as a conversion of NaN to an integer. */
-    return !(c > 0.0f) ? 0 : c >= (float)(cells - 1) ? cells - 1 : (uint32_t)c;
+    const float4 zero = f4_set1(0.0f), has = f4_eq(a, a);
+    const float4 ca = f4_mul(f4_sub(a, f4_set1(g->a0)), f4_set1(g->sa));
+    const float4 cb = f4_mul(f4_sub(b, f4_set1(g->b0)), f4_set1(g->sb));
+    const float4 x = f4_trunc(f4_min(f4_max(ca, zero), f4_set1((float)(g->gx - 1))));
+    const float4 y = f4_trunc(f4_min(f4_max(cb, zero), f4_set1((float)(g->gy - 1))));
+    lo[0] = f4_min(lo[0], f4_select(has, f4_sub(ca, x), f4_set1(INFINITY)));
+    hi[0] = f4_max(hi[0], f4_select(has, f4_sub(ca, x), f4_set1(-INFINITY)));
+    lo[1] = f4_min(lo[1], f4_select(has, f4_sub(cb, y), f4_set1(INFINITY)));
+    hi[1] = f4_max(hi[1], f4_select(has, f4_sub(cb, y), f4_set1(-INFINITY)));
+    int32_t xs[4], ys[4];
+    f4_truncate(x, xs);
+    f4_truncate(y, ys);
+    const unsigned with = f4_bits(has);
+    for (uint32_t k = 0; k < 4; k++)
+        cell[k * step] = with >> k & 1u ? (uint32_t)ys[k] * g->stride + (uint32_t)xs[k] : RAY_BIN_NO_CELL;
 }
 
 static void rays_cell_item(void *job, uint32_t item)
 {
     ray_bin_job *j = job;
     const grid *g = &j->g;
-    for (uint32_t i = item * RAY_ITEM, end = ray_item_end(j, item); i < end; i++) {
-        const float a = j->ray_ab[2 * i], b = j->ray_ab[2 * i + 1];
-        j->ray_cell[i] = isnan(a) ? RAY_BIN_NO_CELL
-                                  : cell_of(b, g->b0, g->sb, g->gy) * g->stride + cell_of(a, g->a0, g->sa, g->gx);
+    float4 lo[2] = { f4_set1(INFINITY), f4_set1(INFINITY) }, hi[2] = { f4_set1(-INFINITY), f4_set1(-INFINITY) };
+    uint32_t i = item * RAY_ITEM;
+    const uint32_t end = ray_item_end(j, item);
+    for (; end - i >= 8; i += 8) {
+        /* Eight rays' (a, b) pairs as four rows, transposed: the even rays' a and b, the odd
+         * rays' a and b. */
+        float4 rows[4];
+        for (int k = 0; k < 4; k++) rows[k] = f4_load(&j->ray_ab[2 * i + 4 * k]);
+        f4_transpose(rows);
+        rays_cell4(g, rows[0], rows[1], &j->ray_cell[i], 2, lo, hi);
+        rays_cell4(g, rows[2], rows[3], &j->ray_cell[i + 1], 2, lo, hi);
     }
+    for (; i < end; i++) {
+        uint32_t cell[4];
+        rays_cell4(g, f4_set1(j->ray_ab[2 * i]), f4_set1(j->ray_ab[2 * i + 1]), cell, 1, lo, hi);
+        j->ray_cell[i] = cell[0];
+    }
+    float *offset = j->ray_results[item].offset;
+    offset[0] = f4_min_lane(lo[0]);
+    offset[1] = -f4_min_lane(f4_sub(f4_set1(0.0f), hi[0]));
+    offset[2] = f4_min_lane(lo[1]);
+    offset[3] = -f4_min_lane(f4_sub(f4_set1(0.0f), hi[1]));
 }
 
 static uint32_t cell_item_first(const ray_bin_job *j, uint32_t item)
@@ -339,12 +415,25 @@ typedef struct projected4 {
     float nx[3][4], ny[3][4], c[3][4];
 } projected4;
 
-/* The cell columns (or rows) of four projected coordinates, clamped to the grid: cell_of's, four
- * at a time (MAXPS gives its second operand, 0, for a NaN). */
-static void cells_of4(float4 x, float x0, float scale, uint32_t cells, int32_t out[4])
+/* The first and last cell columns (or rows) whose rays boxes from x to y (projected, four at a
+ * time) may reach, clamped to the grid: cell k's rays lie at k + offset_min .. k + offset_max
+ * in the grid's units (c = (x - x0) * scale, as rays_cell4's), so k from c(x) - offset_max up to
+ * c(y) - offset_min, with room for the rounding of these differences (eight ulps of them, and
+ * 2^-8 of a cell). The last is first - 1 (or -1) where no cell is reached; a NaN counts as 0 (a
+ * corner all but on the origin's plane, which the plan turns away): MAXPS gives its second
+ * operand for it. */
+static void spans_of4(float4 x, float4 y, float x0, float scale, uint32_t cells, float offset_min,
+                      float offset_max, int32_t first[4], int32_t last[4])
 {
-    const float4 c = f4_mul(f4_sub(x, f4_set1(x0)), f4_set1(scale));
-    f4_truncate(f4_min(f4_max(c, f4_set1(0.0f)), f4_set1((float)(cells - 1))), out);
+    const float4 zero = f4_set1(0.0f), top = f4_set1((float)(cells - 1)), one = f4_set1(1.0f);
+    const float4 dx = f4_sub(f4_mul(f4_sub(x, f4_set1(x0)), f4_set1(scale)), f4_set1(offset_max));
+    const float4 dy = f4_sub(f4_mul(f4_sub(y, f4_set1(x0)), f4_set1(scale)), f4_set1(offset_min));
+    const float4 v = f4_sub(dx, f4_add(f4_set1(0x1p-8f), f4_mul(f4_abs(dx), f4_set1(0x1p-20f))));
+    const float4 w = f4_add(dy, f4_add(f4_set1(0x1p-8f), f4_mul(f4_abs(dy), f4_set1(0x1p-20f))));
+    const float4 vc = f4_min(f4_max(v, zero), top), wc = f4_min(f4_max(w, zero), top);
+    const float4 down = f4_trunc(vc); /* vc >= 0: its floor */
+    f4_truncate(f4_add(down, f4_and(f4_lt(down, vc), one)), first);
+    f4_truncate(f4_select(f4_lt(w, zero), f4_set1(-1.0f), f4_trunc(wc)), last);
 }
 
 /* Triangles t .. t + 3 (a lane past `end` repeats triangle t) projected, widened (WIDEN_ULPS)
@@ -388,11 +477,9 @@ static unsigned project_triangles(const ray_bin_job *j, uint32_t t, uint32_t end
         f4_mul(f4_mul(f4_set1((float)WIDEN_ULPS), f4_div(far, min_z)), f4_add(f4_set1(1.0f), max_tan2));
     const float4 box[4] = { f4_sub(lo_a, widen), f4_add(hi_a, widen), f4_sub(lo_b, widen), f4_add(hi_b, widen) };
     const grid *g = &j->g;
-    for (int k = 0; k < 4; k++) {
-        f4_store(out->box[k], box[k]);
-        if (k < 2) cells_of4(box[k], g->a0, g->sa, g->gx, out->span[k]);
-        else cells_of4(box[k], g->b0, g->sb, g->gy, out->span[k]);
-    }
+    for (int k = 0; k < 4; k++) f4_store(out->box[k], box[k]);
+    spans_of4(box[0], box[1], g->a0, g->sa, g->gx, j->offset_min[0], j->offset_max[0], out->span[0], out->span[1]);
+    spans_of4(box[2], box[3], g->b0, g->sb, g->gy, j->offset_min[1], j->offset_max[1], out->span[2], out->span[3]);
     /* The edges. Distances within `tolerance` of the triangle count as inside: the widening,
      * and the rounding of the edge terms (a few ulps of the coordinates' size), with room. */
     float4 ex[3], ey[3], perimeter = f4_set1(0.0f), reach = f4_set1(1.0f);
@@ -553,6 +640,13 @@ static bool count_range(ray_bin_job *j, uint32_t item, uint32_t first, uint32_t 
             return false;
         }
         for (uint32_t lane = 0; lane < lanes; lane++) {
+            if (p.span[1][lane] < p.span[0][lane] || p.span[3][lane] < p.span[2][lane]) {
+                /* Between the rays: no cell. */
+                j->tri_cell[t4 + lane] = 0;
+                j->tri_cells[t4 + lane] = 0;
+                j->tri_width[t4 + lane] = 1;
+                continue;
+            }
             tri_test s;
             tri_test_of(&p, lane, &s);
             if (!count_triangle(j, t4 + lane, &s, count, &visited, budget)) {
@@ -660,31 +754,86 @@ static bool shared_origin(const vkrt_ray *rays, const vkrt_gpu_push *camera, uin
     return true;
 }
 
+/* Rays make_frame reads for a first row, and the fewest that make one. */
+enum { ROW_SEARCH = 1u << 14, ROW_MIN = 8 };
+
+/* The projection of d onto the plane at distance 1 along f, less f; false where d is not ahead. */
+static bool row_point(const vkrt_ray *ray, const double f[3], double out[3])
+{
+    const double d[3] = { ray->dir[0], ray->dir[1], ray->dir[2] }, z = dot(d, f);
+    if (!ray_valid(ray) || !(z > 0.0)) return false;
+    for (int k = 0; k < 3; k++) out[k] = d[k] / z - f[k];
+    return true;
+}
+
+/* r (left 0 where the rays start with no row): from the first ray's projection to the last's
+ * of the run that steps on along the first two's direction. */
+static void first_row_direction(const vkrt_ray *rays, const vkrt_gpu_push *camera, uint32_t count, const double f[3],
+                                double r[3])
+{
+    double p0[3], p1[3], step[3];
+    const vkrt_ray r0 = job_ray(rays, camera, 0), r1 = job_ray(rays, camera, count > 1 ? 1 : 0);
+    if (count < ROW_MIN || !row_point(&r0, f, p0) || !row_point(&r1, f, p1)) return;
+    for (int k = 0; k < 3; k++) step[k] = p1[k] - p0[k];
+    double last[3], along = dot(step, step);
+    memcpy(last, p1, sizeof last);
+    uint32_t i = 2;
+    for (; i < count && i < ROW_SEARCH; i++) {
+        const vkrt_ray ri = job_ray(rays, camera, i);
+        double p[3], d[3];
+        if (!row_point(&ri, f, p)) break;
+        for (int k = 0; k < 3; k++) d[k] = p[k] - p0[k];
+        const double a = dot(d, step);
+        if (!(a > along)) break;
+        along = a;
+        memcpy(last, p, sizeof last);
+    }
+    if (i < ROW_MIN || !(along > 0.0)) return;
+    for (int k = 0; k < 3; k++) r[k] = last[k] - p0[k];
+    const double off = dot(r, f); /* rounding's */
+    for (int k = 0; k < 3; k++) r[k] -= off * f[k];
+}
+
 /* The axis f: the mean unit direction of up to RAY_BIN_AXIS_SAMPLES valid rays spread over the
- * set; r and u complete the frame, r from the world axis least along f. False where the
- * directions cancel out. */
+ * set; r and u complete the frame, r along the rays' first row (first_row_direction) or from
+ * the world axis least along f. False where the directions cancel out. */
 static bool make_frame(const vkrt_ray *rays, const vkrt_gpu_push *camera, uint32_t count, frame *fr)
 {
     double sum[3] = { 0.0, 0.0, 0.0 };
+    /* In pairs from both ends: a camera's rays i and count - 1 - i mirror each other, so its
+     * axis comes out its forward direction, and its pixel centres a regular grid (make_grid). */
     const uint32_t step = count / RAY_BIN_AXIS_SAMPLES + 1;
-    for (uint32_t i = 0; i < count; i += step) {
-        const vkrt_ray r = job_ray(rays, camera, i);
-        if (!ray_valid(&r)) continue;
-        const double d[3] = { r.dir[0], r.dir[1], r.dir[2] };
-        const double len = sqrt(dot(d, d));
-        for (int k = 0; k < 3; k++) sum[k] += d[k] / len;
-    }
+    for (uint32_t i = 0; i <= (count - 1) / 2; i += step)
+        for (int end = 0; end < 2; end++) {
+            if (end && count - 1 - i == i) break;
+            const vkrt_ray r = job_ray(rays, camera, end ? count - 1 - i : i);
+            if (!ray_valid(&r)) continue;
+            const double d[3] = { r.dir[0], r.dir[1], r.dir[2] };
+            const double len = sqrt(dot(d, d));
+            for (int k = 0; k < 3; k++) sum[k] += d[k] / len;
+        }
     const double len = sqrt(dot(sum, sum));
     if (!(len > 0.0) || !isfinite(len)) return false;
     for (int k = 0; k < 3; k++) fr->f[k] = sum[k] / len;
-    int least = 0;
-    for (int k = 1; k < 3; k++)
-        if (abs_d(fr->f[k]) < abs_d(fr->f[least])) least = k;
-    double axis[3] = { 0.0, 0.0, 0.0 };
-    axis[least] = 1.0;
     const double *f = fr->f;
-    const double r[3] = { axis[1] * f[2] - axis[2] * f[1], axis[2] * f[0] - axis[0] * f[2],
-                          axis[0] * f[1] - axis[1] * f[0] };
+    /* r along the first row of rays, where they start with one: a camera's pixels in turn,
+     * whose projections step along r until the next row turns back. Then a runs along the
+     * camera's rows and b down its columns, and its pixel centres lie on a lattice of the two
+     * (lattice_grid); the row's ends give r to the directions' rounding over the row's width,
+     * where two neighbours would give it over a pixel's step (some 1e-4 of an angle). Else r
+     * comes from the world axis least along f. */
+    double r[3] = { 0.0, 0.0, 0.0 };
+    first_row_direction(rays, camera, count, f, r);
+    if (!(sqrt(dot(r, r)) > 0x1p-20)) {
+        int least = 0;
+        for (int k = 1; k < 3; k++)
+            if (abs_d(f[k]) < abs_d(f[least])) least = k;
+        double axis[3] = { 0.0, 0.0, 0.0 };
+        axis[least] = 1.0;
+        r[0] = axis[1] * f[2] - axis[2] * f[1];
+        r[1] = axis[2] * f[0] - axis[0] * f[2];
+        r[2] = axis[0] * f[1] - axis[1] * f[0];
+    }
     const double rl = sqrt(dot(r, r));
     for (int k = 0; k < 3; k++) fr->r[k] = r[k] / rl;
     fr->u[0] = f[1] * fr->r[2] - f[2] * fr->r[1];
@@ -726,6 +875,30 @@ static bool box_projection(const frame *fr, const vkrt_gpu_node *box, float4 rec
     return true;
 }
 
+/* Where the rays' projections lie on a regular lattice, as a camera's pixel centres do seen
+ * along its forward direction, a grid of a cell a lattice point, each point at its cell's
+ * centre: then a triangle box reaches only the cells whose centres it holds (the count's spans,
+ * from the rays' offsets in their cells), and one between the points none. The lattice's steps
+ * are the least differences between rays in turn (a camera's neighbours in a row, and its
+ * rows); false where the bounds are no whole number of them, or the cells would be too many. */
+static bool lattice_grid(const double bounds[4], const float step[2], uint32_t rays, grid *out)
+{
+    double n[2];
+    for (int k = 0; k < 2; k++) {
+        const double w = bounds[2 * k + 1] - bounds[2 * k];
+        if (!(step[k] > 0.0f) || !(step[k] < INFINITY) || !(w / step[k] < (double)rays)) return false;
+        n[k] = floor(w / step[k] + 0.5);
+        if (!(abs_d(w / step[k] - n[k]) <= 0.25)) return false;
+    }
+    if ((n[0] + 1.0) * (n[1] + 1.0) > 2.0 * rays + 64.0) return false;
+    const uint32_t gx = (uint32_t)n[0] + 1, gy = (uint32_t)n[1] + 1, stride = (gx + 3) & ~3u;
+    const double wa = bounds[1] - bounds[0], wb = bounds[3] - bounds[2];
+    const double sa = wa > 0.0 ? n[0] / wa : 1.0 / step[0], sb = wb > 0.0 ? n[1] / wb : 1.0 / step[1];
+    *out = (grid){ .a0 = (float)(bounds[0] - 0.5 / sa), .b0 = (float)(bounds[2] - 0.5 / sb), .gx = gx, .gy = gy,
+                   .stride = stride, .cells = stride * gy, .sa = (float)sa, .sb = (float)sb };
+    return true;
+}
+
 /* A grid of about one square cell a ray over the rays' projections. */
 static grid make_grid(const double bounds[4], uint32_t rays)
 {
@@ -742,7 +915,7 @@ static grid make_grid(const double bounds[4], uint32_t rays)
             gy = (gy + 1) / 2;
         }
     }
-    /* The largest projection maps past the last cell, where cell_of clamps it. */
+    /* The largest projection maps past the last cell, where rays_cell4 clamps it. */
     const uint32_t stride = (gx + 3) & ~3u;
     return (grid){ .a0 = (float)bounds[0], .b0 = (float)bounds[2], .gx = gx, .gy = gy, .stride = stride,
                    .cells = stride * gy,
@@ -813,6 +986,7 @@ static ray_bin_outcome plan(core *c, ray_bin_job *j, ray_bin_limits limits, ray_
     work_pool_run(j->pool, ray_items, rays_project_item, NULL, j);
     double bounds[4] = { INFINITY, -INFINITY, INFINITY, -INFINITY };
     uint32_t valid = 0;
+    float step[2] = { INFINITY, INFINITY };
     for (uint32_t i = 0; i < ray_items; i++) {
         const ray_item_result *res = &j->ray_results[i];
         if (res->origin_differs) return RAY_BIN_ORIGINS_DIFFER;
@@ -822,9 +996,11 @@ static ray_bin_outcome plan(core *c, ray_bin_job *j, ray_bin_limits limits, ray_
         bounds[2] = min_d(bounds[2], res->bounds[2]);
         bounds[3] = max_d(bounds[3], res->bounds[3]);
         valid += res->valid;
+        for (int k = 0; k < 2; k++) step[k] = res->step[k] < step[k] ? res->step[k] : step[k];
     }
     if (!valid) return RAY_BIN_NONE_ENTER;
-    j->g = make_grid(bounds, valid);
+    const bool lattice = lattice_grid(bounds, step, valid, &j->g);
+    if (!lattice) j->g = make_grid(bounds, valid);
     const uint32_t cells = j->g.cells;
     *ok = (j->cell_block = scratch_array(c, m, ARRAY_CELL_BOUNDS, cells / 4, sizeof *j->cell_block)) &&
           (j->cell_start = scratch_array(c, m, ARRAY_CELL_START, (size_t)cells + 1, sizeof *j->cell_start)) &&
@@ -832,6 +1008,18 @@ static ray_bin_outcome plan(core *c, ray_bin_job *j, ray_bin_limits limits, ray_
     if (!*ok) return RAY_BIN_TOO_LONG;
     work_pool_run(j->pool, ray_items, rays_cell_item, NULL, j);
     work_pool_run(j->pool, j->items, cells_bound_item, NULL, j);
+    for (int k = 0; k < 2; k++) {
+        j->offset_min[k] = INFINITY;
+        j->offset_max[k] = -INFINITY;
+    }
+    for (uint32_t i = 0; i < ray_items; i++)
+        for (int k = 0; k < 2; k++) {
+            const float *offset = j->ray_results[i].offset;
+            j->offset_min[k] = offset[2 * k] < j->offset_min[k] ? offset[2 * k] : j->offset_min[k];
+            j->offset_max[k] = offset[2 * k + 1] > j->offset_max[k] ? offset[2 * k + 1] : j->offset_max[k];
+        }
+    const bool on_lattice = lattice && j->offset_min[0] > 0.25f && j->offset_max[0] < 0.75f &&
+                            j->offset_min[1] > 0.25f && j->offset_max[1] < 0.75f;
     /* Every entry costs a cell visit, and few visits find nothing on a mesh of small triangles;
      * far more visits than entries allowed means big triangles everywhere. */
     j->cell_budget = 8ull * limits.max_entries + cells + 1;
@@ -863,7 +1051,7 @@ static ray_bin_outcome plan(core *c, ray_bin_job *j, ray_bin_limits limits, ray_
     work_pool_run(j->pool, j->items, cells_place_item, NULL, j);
     j->cell_start[cells] = (uint32_t)total;
     *out = (ray_bins){ .ray_cell = j->ray_cell, .cell_start = j->cell_start,
-                       .entry_count = (uint32_t)total, .longest = longest };
+                       .entry_count = (uint32_t)total, .longest = longest, .on_lattice = on_lattice };
     return RAY_BIN_BUILT;
 }
 

@@ -34,6 +34,9 @@ typedef struct ray_bins {
     const uint32_t *cell_start; /* each cell's first entry, then one past the last cell's last */
     uint32_t entry_count;       /* all lists together */
     uint32_t longest;           /* the longest list */
+    bool on_lattice;            /* the rays' projections lie on a regular lattice (a camera's
+                                   pixel centres), a cell each: a triangle between them is in
+                                   no list without a test */
     ray_bin_job *job;           /* the plan's state, for ray_bin_fill */
 } ray_bins;
 

@@ -135,6 +135,10 @@ static void masks_selects_and_lane_operations_are_their_expressions(void)
             float x[4], r[4];
             lanes(a, x), lanes(f4_abs(a), r);
             for (int l = 0; l < 4; l++) CHECK(bits_of(r[l]) == (bits_of(x[l]) & 0x7FFFFFFFu));
+            /* f4_trunc within its domain (|x| < 2^31): toward zero, as a float. */
+            lanes(f4_trunc(a), r);
+            for (int l = 0; l < 4; l++)
+                if (fabsf(x[l]) < 0x1p31f) CHECK_MSG(same(r[l], (float)(int32_t)x[l]), "f4_trunc(%a)", x[l]);
             /* f4_min(f4_min(x, z), f4_min(y, w)), the order deciding which zero is returned. */
             float xz = e_min(x[0], x[2]), yw = e_min(x[1], x[3]);
             CHECK_MSG(same(f4_min_lane(a), e_min(xz, yw)), "f4_min_lane(%a %a %a %a)", x[0], x[1], x[2], x[3]);

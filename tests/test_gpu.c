@@ -1528,20 +1528,30 @@ static void ray_bin_lists_hold_every_triangle_a_ray_hits(void)
         for (int a = 0; a < 2; a++) moved[i].dir[a] += (float)(0.02 * (rng_uniform(&rng) - 0.5));
         if (i / 160 >= 40 && i / 160 < 60) moved[i].dir[0] = NAN;
     }
+    /* A camera turned about all three axes, its image an odd size: its pixel centres a lattice
+     * still, along its own rows (the plan's frame follows the rays' first row). */
+    const size_t turned_n = 173 * 131;
+    vkrt_ray *turned = malloc(turned_n * sizeof *turned);
+    const vkrt_camera turned_camera = { .eye = { 0.9f, 0.5f, 1.1f }, .target = { 0.05f, -0.02f, 0.0f },
+                                        .up = { 0.3f, 1.0f, 0.1f }, .fov_y_degrees = 50.0f };
+    CHECK(vkrt_camera_rays(cpu, &turned_camera, 173, 131, turned, turned_n) == VKRT_OK);
     const struct {
         const vkrt_ray *rays;
         size_t n, step;
         const char *what;
-    } sets[] = { { camera, camera_n, 3, "camera" },
-                 { corner, corner_n, 13, "corners and edges" },
-                 { moved, camera_n, 3, "camera rays off the grid" } };
+        bool lattice; /* the plan should find the rays on a lattice */
+    } sets[] = { { camera, camera_n, 3, "camera", true },
+                 { corner, corner_n, 13, "corners and edges", false },
+                 { moved, camera_n, 3, "camera rays off the grid", false },
+                 { turned, turned_n, 3, "turned camera", true } };
+    const int pass_set[] = { 0, 1, 0, 2, 3 };
     /* The camera's lists planned first without kept scratch, then with the scratch each plan
      * leaves (the corners' plan after the camera's, the camera's again after theirs): the same
      * lists. */
     ray_bin_scratch *scratch = NULL;
     uint32_t *first_lists = NULL, first_count = 0;
-    for (int pass = 0; pass < 4; pass++) {
-        const int set = pass == 3 ? 2 : pass % 2;
+    for (int pass = 0; pass < 5; pass++) {
+        const int set = pass_set[pass];
         const vkrt_ray *rays = sets[set].rays;
         const uint32_t n = (uint32_t)sets[set].n;
         ray_bins bins;
@@ -1551,6 +1561,8 @@ static void ray_bin_lists_hold_every_triangle_a_ray_hits(void)
                            &outcome) == VKRT_OK);
         CHECK_MSG(outcome == RAY_BIN_BUILT, "%s: outcome %d", sets[set].what, (int)outcome);
         if (outcome != RAY_BIN_BUILT) continue;
+        CHECK_MSG(bins.on_lattice == sets[set].lattice, "%s: on a lattice %d, expected %d", sets[set].what,
+                  (int)bins.on_lattice, (int)sets[set].lattice);
         uint32_t *entries = malloc((size_t)(bins.entry_count ? bins.entry_count : 1) * sizeof *entries);
         memset(entries, 0xFF, (size_t)bins.entry_count * sizeof *entries);
         ray_bin_fill(&bins, entries);
@@ -1627,6 +1639,7 @@ static void ray_bin_lists_hold_every_triangle_a_ray_hits(void)
     }
     free(first_lists);
     free(camera);
+    free(turned);
     free(moved);
     free(corner);
     free(pos);
