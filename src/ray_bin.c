@@ -285,6 +285,11 @@ static void rays_project_item(void *job, uint32_t item)
     j->ray_results[item] = res;
 }
 
+/* A projected coordinate in the grid's units along one axis: c = (x - x0) * scale. The rays'
+ * cells and offsets and the triangles' spans take it from here alike, so that it is monotonic
+ * between them (a box's lo <= a ray's a gives c(lo) <= c(a)). */
+static float4 grid_coord4(float4 x, float x0, float scale) { return f4_mul(f4_sub(x, f4_set1(x0)), f4_set1(scale)); }
+
 /* Four rays' cells into cell[0], cell[step], cell[2 step] and cell[3 step]: of c = (a - a0) sa
  * its column, of b's its row, clamped to the grid (truncation is floor from 0 up; MAXPS gives
  * 0 for a NaN, never a conversion of NaN to an integer: a ray without a cell has NaN, and gets
@@ -294,14 +299,14 @@ static void rays_project_item(void *job, uint32_t item)
 static void rays_cell4(const grid *g, float4 a, float4 b, uint32_t *cell, uint32_t step, float4 lo[2], float4 hi[2])
 {
     const float4 zero = f4_set1(0.0f), has = f4_eq(a, a);
-    const float4 ca = f4_mul(f4_sub(a, f4_set1(g->a0)), f4_set1(g->sa));
-    const float4 cb = f4_mul(f4_sub(b, f4_set1(g->b0)), f4_set1(g->sb));
+    const float4 ca = grid_coord4(a, g->a0, g->sa), cb = grid_coord4(b, g->b0, g->sb);
     const float4 x = f4_trunc(f4_min(f4_max(ca, zero), f4_set1((float)(g->gx - 1))));
     const float4 y = f4_trunc(f4_min(f4_max(cb, zero), f4_set1((float)(g->gy - 1))));
-    lo[0] = f4_min(lo[0], f4_select(has, f4_sub(ca, x), f4_set1(INFINITY)));
-    hi[0] = f4_max(hi[0], f4_select(has, f4_sub(ca, x), f4_set1(-INFINITY)));
-    lo[1] = f4_min(lo[1], f4_select(has, f4_sub(cb, y), f4_set1(INFINITY)));
-    hi[1] = f4_max(hi[1], f4_select(has, f4_sub(cb, y), f4_set1(-INFINITY)));
+    const float4 fa = f4_sub(ca, x), fb = f4_sub(cb, y);
+    lo[0] = f4_min(lo[0], f4_select(has, fa, f4_set1(INFINITY)));
+    hi[0] = f4_max(hi[0], f4_select(has, fa, f4_set1(-INFINITY)));
+    lo[1] = f4_min(lo[1], f4_select(has, fb, f4_set1(INFINITY)));
+    hi[1] = f4_max(hi[1], f4_select(has, fb, f4_set1(-INFINITY)));
     int32_t xs[4], ys[4];
     f4_truncate(x, xs);
     f4_truncate(y, ys);
@@ -417,7 +422,7 @@ typedef struct projected4 {
 
 /* The first and last cell columns (or rows) whose rays boxes from x to y (projected, four at a
  * time) may reach, clamped to the grid: cell k's rays lie at k + offset_min .. k + offset_max
- * in the grid's units (c = (x - x0) * scale, as rays_cell4's), so k from c(x) - offset_max up to
+ * in the grid's units (grid_coord4's c), so k from c(x) - offset_max up to
  * c(y) - offset_min, with room for the rounding of these differences (eight ulps of them, and
  * 2^-8 of a cell). The last is first - 1 (or -1) where no cell is reached; a NaN counts as 0 (a
  * corner all but on the origin's plane, which the plan turns away): MAXPS gives its second
@@ -426,10 +431,11 @@ static void spans_of4(float4 x, float4 y, float x0, float scale, uint32_t cells,
                       float offset_max, int32_t first[4], int32_t last[4])
 {
     const float4 zero = f4_set1(0.0f), top = f4_set1((float)(cells - 1)), one = f4_set1(1.0f);
-    const float4 dx = f4_sub(f4_mul(f4_sub(x, f4_set1(x0)), f4_set1(scale)), f4_set1(offset_max));
-    const float4 dy = f4_sub(f4_mul(f4_sub(y, f4_set1(x0)), f4_set1(scale)), f4_set1(offset_min));
-    const float4 v = f4_sub(dx, f4_add(f4_set1(0x1p-8f), f4_mul(f4_abs(dx), f4_set1(0x1p-20f))));
-    const float4 w = f4_add(dy, f4_add(f4_set1(0x1p-8f), f4_mul(f4_abs(dy), f4_set1(0x1p-20f))));
+    const float4 dx = f4_sub(grid_coord4(x, x0, scale), f4_set1(offset_max));
+    const float4 dy = f4_sub(grid_coord4(y, x0, scale), f4_set1(offset_min));
+    const float4 slack_x = f4_add(f4_set1(0x1p-8f), f4_mul(f4_abs(dx), f4_set1(0x1p-20f)));
+    const float4 slack_y = f4_add(f4_set1(0x1p-8f), f4_mul(f4_abs(dy), f4_set1(0x1p-20f)));
+    const float4 v = f4_sub(dx, slack_x), w = f4_add(dy, slack_y);
     const float4 vc = f4_min(f4_max(v, zero), top), wc = f4_min(f4_max(w, zero), top);
     const float4 down = f4_trunc(vc); /* vc >= 0: its floor */
     f4_truncate(f4_add(down, f4_and(f4_lt(down, vc), one)), first);
@@ -1018,6 +1024,8 @@ static ray_bin_outcome plan(core *c, ray_bin_job *j, ray_bin_limits limits, ray_
             j->offset_min[k] = offset[2 * k] < j->offset_min[k] ? offset[2 * k] : j->offset_min[k];
             j->offset_max[k] = offset[2 * k + 1] > j->offset_max[k] ? offset[2 * k + 1] : j->offset_max[k];
         }
+    /* Found on one: every ray near its cell's centre (a lattice grid that missed the rays' own
+     * lattice would spread them over their cells, and the spans gain nothing). */
     const bool on_lattice = lattice && j->offset_min[0] > 0.25f && j->offset_max[0] < 0.75f &&
                             j->offset_min[1] > 0.25f && j->offset_max[1] < 0.75f;
     /* Every entry costs a cell visit, and few visits find nothing on a mesh of small triangles;
