@@ -2,15 +2,19 @@
  *   - serially, the shared origin from the first rays, and the axis from a sample of them;
  *   1. rays: each one's projection (a, b) onto the plane at distance 1 along the axis, whether
  *      it may enter the scene's box (within the box's projection, or the box test), the origin
- *      check, the angle check, and their bounds, which the grid spans; in one item of
- *      STEP_SAMPLE, the least steps between rays in turn: where the rays lie on a lattice (a
- *      camera's pixel centres), the grid has a cell a lattice point (lattice_grid);
+ *      check, the angle check, and their bounds, which the grid spans; in the first STEP_RAYS
+ *      of each item (of a large set), the least steps between rays in turn: where the rays lie
+ *      on a lattice (a camera's pixel centres), the grid has a cell a lattice point
+ *      (lattice_grid);
  *   2. rays: each one's grid cell, and where in their cells the rays lie;
- *   3. cells, an item a range of them: each cell's bounds of its rays' projections;
+ *   3. off a lattice, cells, an item a range of them: each cell's bounds of its rays'
+ *      projections;
  *   4. triangles, four at a time: each one's projection, widened, the cells its box may reach
  *      by where the rays lie in theirs (none for a triangle between a lattice's points), and a
- *      count in every cell whose rays' bounds its box and edges may hold (each item its own
- *      counters, and its own range of triangles, taken a chunk at a time: tri_segment_first);
+ *      count in every cell whose rays' bounds its box and edges may hold; on a lattice, where
+ *      every cell's rays lie in one small box about its centre, that box against the edges in
+ *      the grid's units, four triangles together (raster_spans4). Each item its own counters,
+ *      and its own range of triangles, taken a chunk at a time (tri_segment_first);
  *   - the counts become each item's write positions (a scan, each item a range of cells);
  * and ray_bin_fill:
  *   5. triangles: each entry written at its position, in the cells the count noted (a triangle
@@ -113,13 +117,18 @@ struct ray_bin_job {
      * rays (lattice_grid) every ray lies at its cell's centre, and a small triangle between
      * them spans no cell. */
     float offset_min[2], offset_max[2];
+    /* On a lattice the rays of cell (x, y) lie in the box of centre (x, y) + ray_centre and half
+     * widths ray_half (from the offsets), and the count tests that box against a triangle's edges
+     * in the grid's units (raster_cells4): no cell's bounds are read, nor found. */
+    bool raster;
+    float ray_centre[2], ray_half[2];
     ray_item_result *ray_results;
     float *ray_ab;             /* 2 a ray; NaN for a ray that gets no cell */
     uint32_t *ray_cell;
     /* Each cell's bounds of its rays' projections (min > max where it has none), in blocks of
      * four cells: a min, a max, b min and b max of the four, so that a block is four loads from
      * one cache line. */
-    float (*cell_block)[4][4];
+    float (*cell_block)[4][4]; /* not on a lattice (raster) */
     uint32_t *cell_start;      /* cells + 1 */
     uint32_t *counts;          /* per triangle item, a cell each: its count, then its write
                                   position (item i's at i * cells) */
@@ -176,9 +185,12 @@ static uint32_t ray_item_end(const ray_bin_job *j, uint32_t item)
     return end < j->ray_count ? (uint32_t)end : j->ray_count;
 }
 
-/* The rays' lattice steps (lattice_grid) are sought in one ray item of STEP_SAMPLE, rows of a
- * camera's rays enough. */
-enum { STEP_SAMPLE = 8 };
+/* The rays' lattice steps (lattice_grid) are sought in the first STEP_RAYS of every ray item
+ * where the rays are many, in all of them where they are fewer than STEP_ALL: two rows of a
+ * 1024-wide camera's rays in every sixteen, so that a mesh seen in a band of the image has some
+ * (the steps are found only between rays in turn that may enter the scene's box, and the rows'
+ * step only where two rows of them meet); an eighth of the rays. */
+enum { STEP_RAYS = RAY_ITEM / 8, STEP_ALL = 8 * RAY_ITEM };
 
 /* Four rays' (a and b, NaN where they got no cell; those of `keep`) differences from the last
  * ray before each that got a cell (last[], carried on), folded into steps[] where they pass
@@ -260,7 +272,7 @@ static void rays_project_item(void *job, uint32_t item)
             j->ray_ab[2 * (i + k)] = av[k];
             j->ray_ab[2 * (i + k) + 1] = bv[k];
         }
-        if (item % STEP_SAMPLE == 0) lattice_steps4(av, bv, keep, last, steps);
+        if (j->ray_count < STEP_ALL || i - item * RAY_ITEM < STEP_RAYS) lattice_steps4(av, bv, keep, last, steps);
         lo_a = f4_min(lo_a, f4_select(kept, a, f4_set1(INFINITY)));
         hi_a = f4_max(hi_a, f4_select(kept, a, f4_set1(-INFINITY)));
         lo_b = f4_min(lo_b, f4_select(kept, b, f4_set1(INFINITY)));
@@ -426,9 +438,9 @@ typedef struct projected4 {
  * c(y) - offset_min, with room for the rounding of these differences (eight ulps of them, and
  * 2^-8 of a cell). The last is first - 1 (or -1) where no cell is reached; a NaN counts as 0 (a
  * corner all but on the origin's plane, which the plan turns away): MAXPS gives its second
- * operand for it. */
+ * operand for it. The first also as a float (first_f). */
 static void spans_of4(float4 x, float4 y, float x0, float scale, uint32_t cells, float offset_min,
-                      float offset_max, int32_t first[4], int32_t last[4])
+                      float offset_max, int32_t first[4], int32_t last[4], float4 *first_f)
 {
     const float4 zero = f4_set1(0.0f), top = f4_set1((float)(cells - 1)), one = f4_set1(1.0f);
     const float4 dx = f4_sub(grid_coord4(x, x0, scale), f4_set1(offset_max));
@@ -438,15 +450,48 @@ static void spans_of4(float4 x, float4 y, float x0, float scale, uint32_t cells,
     const float4 v = f4_sub(dx, slack_x), w = f4_add(dy, slack_y);
     const float4 vc = f4_min(f4_max(v, zero), top), wc = f4_min(f4_max(w, zero), top);
     const float4 down = f4_trunc(vc); /* vc >= 0: its floor */
-    f4_truncate(f4_add(down, f4_and(f4_lt(down, vc), one)), first);
+    *first_f = f4_add(down, f4_and(f4_lt(down, vc), one));
+    f4_truncate(*first_f, first);
     f4_truncate(f4_select(f4_lt(w, zero), f4_set1(-1.0f), f4_trunc(wc)), last);
+}
+
+/* The edges of four triangles of corners (px, py) (a lane each), into out's nx, ny and c: inward
+ * normals n and offsets c such that a point p may lie in the triangle only where n . p >= c for
+ * all three. A corner may be off by tol (per axis); the edges move outwards by that and by
+ * `grow` more (per axis: a box of rays of half widths grow about p may reach the triangle). Where
+ * a triangle is too thin for its orientation to be sure, n = 0 and c = -infinity, which every
+ * point passes. */
+static void edges4(const float4 px[3], const float4 py[3], float4 tol_x, float4 tol_y, float4 grow_x, float4 grow_y,
+                   projected4 *out)
+{
+    float4 ex[3], ey[3], perimeter = f4_set1(0.0f);
+    for (int k = 0; k < 3; k++) {
+        ex[k] = f4_sub(px[(k + 1) % 3], px[k]);
+        ey[k] = f4_sub(py[(k + 1) % 3], py[k]);
+        perimeter = f4_add(perimeter, f4_add(f4_abs(ex[k]), f4_abs(ey[k])));
+    }
+    /* (P1 - P0) x (P2 - P0), twice the signed area; every height over four tolerances, so that
+     * no rounding of the corners can turn the triangle over. */
+    const float4 area2 = f4_sub(f4_mul(ey[0], ex[2]), f4_mul(ex[0], ey[2]));
+    const float4 edges = f4_gt(f4_abs(area2), f4_mul(f4_mul(f4_set1(4.0f), f4_max(tol_x, tol_y)), perimeter));
+    const float4 side = f4_select(f4_gt(area2, f4_set1(0.0f)), f4_set1(1.0f), f4_set1(-1.0f));
+    const float4 out_x = f4_add(tol_x, grow_x), out_y = f4_add(tol_y, grow_y);
+    for (int k = 0; k < 3; k++) {
+        const float4 nx = f4_mul(f4_sub(f4_set1(0.0f), ey[k]), side), ny = f4_mul(ex[k], side);
+        const float4 c = f4_sub(f4_add(f4_mul(nx, px[k]), f4_mul(ny, py[k])),
+                                f4_add(f4_mul(out_x, f4_abs(nx)), f4_mul(out_y, f4_abs(ny))));
+        f4_store(out->nx[k], f4_and(edges, nx));
+        f4_store(out->ny[k], f4_and(edges, ny));
+        f4_store(out->c[k], f4_select(edges, c, f4_set1(-INFINITY)));
+    }
 }
 
 /* Triangles t .. t + 3 (a lane past `end` repeats triangle t) projected, widened (WIDEN_ULPS)
  * and given their edges, in float. Four at a time through float4: a triangle's three corners
  * are rows of vkrt_gpu_tri, four of which transpose into x, y and z. Float rounding of the
- * projection is a few ulps of the same terms the widening's 64 are. Returns the mask of lanes
- * with a corner on or behind the origin's plane. */
+ * projection is a few ulps of the same terms the widening's 64 are. The edges are in the
+ * projection's units, or on a lattice (raster) in the grid's from the span's first cell's rays'
+ * centre. Returns the mask of lanes with a corner on or behind the origin's plane. */
 static unsigned project_triangles(const ray_bin_job *j, uint32_t t, uint32_t end, projected4 *out)
 {
     const frame *fr = &j->fr;
@@ -484,30 +529,39 @@ static unsigned project_triangles(const ray_bin_job *j, uint32_t t, uint32_t end
     const float4 box[4] = { f4_sub(lo_a, widen), f4_add(hi_a, widen), f4_sub(lo_b, widen), f4_add(hi_b, widen) };
     const grid *g = &j->g;
     for (int k = 0; k < 4; k++) f4_store(out->box[k], box[k]);
-    spans_of4(box[0], box[1], g->a0, g->sa, g->gx, j->offset_min[0], j->offset_max[0], out->span[0], out->span[1]);
-    spans_of4(box[2], box[3], g->b0, g->sb, g->gy, j->offset_min[1], j->offset_max[1], out->span[2], out->span[3]);
-    /* The edges. Distances within `tolerance` of the triangle count as inside: the widening,
-     * and the rounding of the edge terms (a few ulps of the coordinates' size), with room. */
-    float4 ex[3], ey[3], perimeter = f4_set1(0.0f), reach = f4_set1(1.0f);
-    for (int k = 0; k < 3; k++) {
-        ex[k] = f4_sub(pa[(k + 1) % 3], pa[k]);
-        ey[k] = f4_sub(pb[(k + 1) % 3], pb[k]);
-        perimeter = f4_add(perimeter, f4_add(f4_abs(ex[k]), f4_abs(ey[k])));
-        reach = f4_max(reach, f4_max(f4_abs(pa[k]), f4_abs(pb[k])));
-    }
-    const float4 tolerance = f4_add(widen, f4_mul(f4_set1(0x1p-19f), reach));
-    /* (P1 - P0) x (P2 - P0), twice the signed area; every height over four tolerances, so that
-     * no rounding of the corners can turn the triangle over. */
-    const float4 area2 = f4_sub(f4_mul(ey[0], ex[2]), f4_mul(ex[0], ey[2]));
-    const float4 edges = f4_gt(f4_abs(area2), f4_mul(f4_mul(f4_set1(4.0f), tolerance), perimeter));
-    const float4 side = f4_select(f4_gt(area2, f4_set1(0.0f)), f4_set1(1.0f), f4_set1(-1.0f));
-    for (int k = 0; k < 3; k++) {
-        const float4 nx = f4_mul(f4_sub(f4_set1(0.0f), ey[k]), side), ny = f4_mul(ex[k], side);
-        const float4 c = f4_sub(f4_add(f4_mul(nx, pa[k]), f4_mul(ny, pb[k])),
-                                f4_mul(tolerance, f4_add(f4_abs(nx), f4_abs(ny))));
-        f4_store(out->nx[k], f4_and(edges, nx));
-        f4_store(out->ny[k], f4_and(edges, ny));
-        f4_store(out->c[k], f4_select(edges, c, f4_set1(-INFINITY)));
+    float4 first_x, first_y;
+    spans_of4(box[0], box[1], g->a0, g->sa, g->gx, j->offset_min[0], j->offset_max[0], out->span[0], out->span[1],
+              &first_x);
+    spans_of4(box[2], box[3], g->b0, g->sb, g->gy, j->offset_min[1], j->offset_max[1], out->span[2], out->span[3],
+              &first_y);
+    const float4 zero = f4_set1(0.0f);
+    if (!j->raster) {
+        /* Distances within `tolerance` of the triangle count as inside: the widening, and the
+         * rounding of the edge terms (a few ulps of the coordinates' size), with room. */
+        float4 reach = f4_set1(1.0f);
+        for (int k = 0; k < 3; k++) reach = f4_max(reach, f4_max(f4_abs(pa[k]), f4_abs(pb[k])));
+        const float4 tolerance = f4_add(widen, f4_mul(f4_set1(0x1p-19f), reach));
+        edges4(pa, pb, tolerance, tolerance, zero, zero, out);
+    } else {
+        /* The corners in the grid's units (grid_coord4, as the rays' cells were found), from the
+         * centre of the rays' box in the span's first cell: the cells' rays then lie at whole
+         * steps (dx, dy) from it, within ray_half. A corner's widening scales by the grid's cells
+         * per unit. The grid coordinates of a corner and of a ray are off by their rounding,
+         * under 2^-23 of their size, which no point of the triangle passes the corners' (reach);
+         * the edge terms' rounding is some ulps of the corners' distance from the centre (near). */
+        float4 lx[3], ly[3], reach = f4_set1(1.0f), near = f4_set1(1.0f);
+        const float4 cx = f4_add(first_x, f4_set1(j->ray_centre[0])), cy = f4_add(first_y, f4_set1(j->ray_centre[1]));
+        for (int k = 0; k < 3; k++) {
+            const float4 gx = grid_coord4(pa[k], g->a0, g->sa), gy = grid_coord4(pb[k], g->b0, g->sb);
+            reach = f4_max(reach, f4_max(f4_abs(gx), f4_abs(gy)));
+            lx[k] = f4_sub(gx, cx);
+            ly[k] = f4_sub(gy, cy);
+            near = f4_max(near, f4_max(f4_abs(lx[k]), f4_abs(ly[k])));
+        }
+        const float4 rounding = f4_add(f4_mul(f4_set1(0x1p-20f), reach), f4_mul(f4_set1(0x1p-18f), near));
+        const float4 tol_x = f4_add(f4_mul(widen, f4_set1(g->sa)), rounding);
+        const float4 tol_y = f4_add(f4_mul(widen, f4_set1(g->sb)), rounding);
+        edges4(lx, ly, tol_x, tol_y, f4_set1(j->ray_half[0]), f4_set1(j->ray_half[1]), out);
     }
     return ~f4_bits(front) & 15u;
 }
@@ -566,10 +620,28 @@ static unsigned cells_may_hit4(const ray_bin_job *j, size_t block, const tri_tes
     return f4_bits(in);
 }
 
+/* Which of four cells (dx, dy) from the first of t's span, on a lattice (raster), pass t's edges
+ * in the grid's units (project_triangles): bit k for lane k's. t's box goes unread: the spans
+ * hold it. */
+static unsigned cells_raster4(const tri_test *t, float4 dx, float4 dy)
+{
+    float4 in = f4_eq(dx, dx);
+    for (int k = 0; k < 3; k++) in = f4_and(in, f4_ge(f4_add(f4_mul(t->nx[k], dx), f4_mul(t->ny[k], dy)), t->c[k]));
+    return f4_bits(in);
+}
+
 /* The cells of row y, columns x0 .. x1 (at most 64), that may hold rays that hit t: bit
  * x - x0. */
 static uint64_t row_may_hit(const ray_bin_job *j, const tri_test *t, uint32_t y, uint32_t x0, uint32_t x1)
 {
+    if (j->raster) {
+        const float4 dy = f4_set1((float)(y - t->y0)), steps = f4_set(0.0f, 1.0f, 2.0f, 3.0f);
+        uint64_t bits = 0;
+        for (uint32_t x = x0; x <= x1; x += 4)
+            bits |= (uint64_t)cells_raster4(t, f4_add(f4_set1((float)(x - t->x0)), steps), dy) << (x - x0);
+        const uint32_t width = x1 - x0 + 1;
+        return width >= 64 ? bits : bits & ((1ull << width) - 1);
+    }
     /* From the block that holds x0: its cells before x0 shifted out. */
     const size_t row = (size_t)y * j->g.stride;
     uint64_t bits = cells_may_hit4(j, (row + x0) / 4, t) >> (x0 % 4);
@@ -631,6 +703,85 @@ static bool count_triangle(ray_bin_job *j, uint32_t t, const tri_test *s, uint32
     return true;
 }
 
+/* On a lattice (raster), the cells of the spans of the lanes of p in `lanes` (each of at most 64
+ * cells) that pass their edges: as count_triangle's masks (bit width dy + dx), into cells[].
+ * The four triangles go together, a cell of each a step, so that a span's shape takes no branch:
+ * most of a detailed mesh's are of one to four cells, in no order. */
+static void raster_spans4(const projected4 *p, unsigned lanes, const uint32_t widths[4], const uint32_t spans[4],
+                          uint64_t cells[4])
+{
+    float width[4], count[4];
+    uint32_t most = 0;
+    for (uint32_t k = 0; k < 4; k++) {
+        const bool on = lanes >> k & 1u;
+        width[k] = on ? (float)widths[k] : 1.0f;
+        count[k] = on ? (float)spans[k] : 0.0f;
+        most = on && spans[k] > most ? spans[k] : most;
+        cells[k] = 0;
+    }
+    tri_test t;
+    for (int k = 0; k < 3; k++) {
+        t.nx[k] = f4_load(p->nx[k]);
+        t.ny[k] = f4_load(p->ny[k]);
+        t.c[k] = f4_load(p->c[k]);
+    }
+    const float4 one = f4_set1(1.0f), w = f4_load(width), n = f4_load(count);
+    float4 dx = f4_set1(0.0f), dy = dx, at = dx;
+    for (uint32_t i = 0; i < most; i++) {
+        const unsigned in = cells_raster4(&t, dx, dy) & f4_bits(f4_lt(at, n));
+        for (uint32_t k = 0; k < 4; k++) cells[k] |= (uint64_t)(in >> k & 1u) << i;
+        at = f4_add(at, one);
+        dx = f4_add(dx, one);
+        const float4 wrap = f4_ge(dx, w);
+        dx = f4_andnot(wrap, dx);
+        dy = f4_add(dy, f4_and(wrap, one));
+    }
+}
+
+/* On a lattice (raster): counts the four triangles of p (t4 .. t4 + lanes - 1) into `count`,
+ * as count_triangle does; false where *visited passes `budget`. Without a branch a triangle but
+ * for the rare one over more than 64 cells (count_triangle's) and for its cells past the first. */
+static bool count_raster4(ray_bin_job *j, uint32_t t4, uint32_t lanes, const projected4 *p, uint32_t *count,
+                          uint64_t *visited, uint64_t budget)
+{
+    const uint32_t stride = j->g.stride;
+    uint32_t widths[4], spans[4];
+    unsigned small = 0, big = 0;
+    for (uint32_t k = 0; k < 4; k++) {
+        const int32_t w = p->span[1][k] - p->span[0][k] + 1, h = p->span[3][k] - p->span[2][k] + 1;
+        /* Between the rays (w or h 0): no cell. */
+        const bool has = k < lanes && w > 0 && h > 0;
+        const uint64_t n = has ? (uint64_t)w * (uint64_t)h : 0;
+        widths[k] = has ? (uint32_t)w : 1u;
+        spans[k] = n <= 64 ? (uint32_t)n : 0u;
+        small |= (unsigned)(has && n <= 64) << k;
+        big |= (unsigned)(n > 64) << k;
+    }
+    uint64_t cells[4];
+    raster_spans4(p, small, widths, spans, cells);
+    for (uint32_t k = 0; k < lanes; k++) {
+        const uint32_t t = t4 + k;
+        if (big >> k & 1u) {
+            tri_test s;
+            tri_test_of(p, k, &s);
+            if (!count_triangle(j, t, &s, count, visited, budget)) return false;
+            continue;
+        }
+        const uint32_t cell0 = small >> k & 1u ? (uint32_t)p->span[2][k] * stride + (uint32_t)p->span[0][k] : 0u;
+        uint64_t left = cells[k];
+        /* The first cell without a branch (most triangles have one or none): none adds 0. */
+        const uint32_t at = cell0 + span_cell((uint32_t)__builtin_ctzll(left | 1ull << 63), widths[k], stride);
+        count[left ? at : cell0] += left != 0;
+        for (left &= left - 1; left; left &= left - 1)
+            count[cell0 + span_cell((uint32_t)__builtin_ctzll(left), widths[k], stride)]++;
+        j->tri_cell[t] = cell0;
+        j->tri_cells[t] = cells[k];
+        j->tri_width[t] = (uint8_t)widths[k];
+        *visited += spans[k];
+    }
+    return true;
+}
+
 /* Counts triangles first .. end - 1 into `count`; false, with the item's flag set, where the
  * lists cannot be built. */
 static bool count_range(ray_bin_job *j, uint32_t item, uint32_t first, uint32_t end, uint32_t *count)
@@ -644,6 +795,13 @@ static bool count_range(ray_bin_job *j, uint32_t item, uint32_t first, uint32_t 
         if (project_triangles(j, t4, end, &p) & ((1u << lanes) - 1)) {
             j->item_behind[item] = true;
             return false;
+        }
+        if (j->raster) {
+            if (!count_raster4(j, t4, lanes, &p, count, &visited, budget)) {
+                j->item_over[item] = true;
+                return false;
+            }
+            continue;
         }
         for (uint32_t lane = 0; lane < lanes; lane++) {
             if (p.span[1][lane] < p.span[0][lane] || p.span[3][lane] < p.span[2][lane]) {
@@ -1008,12 +1166,10 @@ static ray_bin_outcome plan(core *c, ray_bin_job *j, ray_bin_limits limits, ray_
     const bool lattice = lattice_grid(bounds, step, valid, &j->g);
     if (!lattice) j->g = make_grid(bounds, valid);
     const uint32_t cells = j->g.cells;
-    *ok = (j->cell_block = scratch_array(c, m, ARRAY_CELL_BOUNDS, cells / 4, sizeof *j->cell_block)) &&
-          (j->cell_start = scratch_array(c, m, ARRAY_CELL_START, (size_t)cells + 1, sizeof *j->cell_start)) &&
+    *ok = (j->cell_start = scratch_array(c, m, ARRAY_CELL_START, (size_t)cells + 1, sizeof *j->cell_start)) &&
           (j->counts = scratch_array(c, m, ARRAY_COUNTS, (size_t)cells * j->items, sizeof *j->counts));
     if (!*ok) return RAY_BIN_TOO_LONG;
     work_pool_run(j->pool, ray_items, rays_cell_item, NULL, j);
-    work_pool_run(j->pool, j->items, cells_bound_item, NULL, j);
     for (int k = 0; k < 2; k++) {
         j->offset_min[k] = INFINITY;
         j->offset_max[k] = -INFINITY;
@@ -1028,6 +1184,24 @@ static ray_bin_outcome plan(core *c, ray_bin_job *j, ray_bin_limits limits, ray_
      * lattice would spread them over their cells, and the spans gain nothing). */
     const bool on_lattice = lattice && j->offset_min[0] > 0.25f && j->offset_max[0] < 0.75f &&
                             j->offset_min[1] > 0.25f && j->offset_max[1] < 0.75f;
+    /* There the box of a cell's rays (ray_centre, ray_half) is a small part of it, and takes the
+     * place of its rays' bounds: a cell without rays, where the rays that miss the scene's box
+     * begin, may then list a triangle near the box's edge that no ray of it tests. Not where a
+     * step of dx or dy in float would no longer be exact. */
+    j->raster = on_lattice && j->g.gx <= (1u << 22) && j->g.gy <= (1u << 22);
+    if (j->raster) {
+        for (int k = 0; k < 2; k++) {
+            /* The offsets lie within 0.25 .. 0.75: both differences from the centre are exact
+             * (Sterbenz); 2^-20 for good measure. */
+            j->ray_centre[k] = 0.5f * (j->offset_min[k] + j->offset_max[k]);
+            const float above = j->offset_max[k] - j->ray_centre[k], below = j->ray_centre[k] - j->offset_min[k];
+            j->ray_half[k] = (above > below ? above : below) + 0x1p-20f;
+        }
+    } else {
+        if (!(*ok = (j->cell_block = scratch_array(c, m, ARRAY_CELL_BOUNDS, cells / 4, sizeof *j->cell_block)) != NULL))
+            return RAY_BIN_TOO_LONG;
+        work_pool_run(j->pool, j->items, cells_bound_item, NULL, j);
+    }
     /* Every entry costs a cell visit, and few visits find nothing on a mesh of small triangles;
      * far more visits than entries allowed means big triangles everywhere. */
     j->cell_budget = 8ull * limits.max_entries + cells + 1;

@@ -1480,14 +1480,63 @@ static void gpu_renders_take_lists_with_the_bvh_image(void)
     vkrt_scene_destroy(s);
 }
 
+/* Checks planned and filled lists (ray_bin.h) of rays[0 .. n) for scene s: every slot written,
+ * each list in the triangles' order without repeats, the longest list the plan's, and every
+ * triangle the watertight test hits (brute force over all of them) in the list of every
+ * step-th ray, hits for at least a quarter of those. Returns the most of those rays any one
+ * triangle has a hit for. */
+static size_t lists_hold_hits(const vkrt_scene *s, const vkrt_ray *rays, uint32_t n, uint32_t step,
+                              const ray_bins *bins, const uint32_t *entries, const char *what)
+{
+    const uint32_t tris = s->bvh.tri_count;
+    uint32_t *rays_hitting = calloc(tris, sizeof *rays_hitting);
+    size_t unwritten = 0, unordered = 0, missing = 0, hits = 0, checked = 0, longest = 0, most = 0;
+    for (uint32_t e = 0; e < bins->entry_count; e++) unwritten += entries[e] >= tris;
+    for (uint32_t i = 0; i < n; i++) {
+        uint32_t list[2];
+        ray_bin_list(bins, i, list);
+        if (list[1] > longest) longest = list[1];
+        for (uint32_t k = 1; k < list[1]; k++) unordered += entries[list[0] + k] <= entries[list[0] + k - 1];
+        if (i % step) continue;
+        checked++;
+        vkrt_gpu_ray ray;
+        memcpy(&ray, &rays[i], sizeof ray);
+        if (ray.tmax == 0.0f) ray.tmax = INFINITY;
+        for (uint32_t t = 0; t < tris; t += 4) {
+            const vkrt_gpu_tri *four[4];
+            for (int k = 0; k < 4; k++) four[k] = &s->tris[t + k < tris ? t + k : t];
+            float tt[4], uu[4], vv[4];
+            const unsigned mask = cpu_trace_watertight4_test(&ray, four, false, tt, uu, vv);
+            for (int k = 0; k < 4 && t + k < tris; k++) {
+                if (!(mask >> k & 1)) continue;
+                hits++;
+                if (++rays_hitting[t + k] > most) most = rays_hitting[t + k];
+                bool listed = false;
+                for (uint32_t e = 0; e < list[1] && !listed; e++) listed = entries[list[0] + e] == t + k;
+                missing += !listed;
+            }
+        }
+    }
+    free(rays_hitting);
+    fprintf(stderr, "  %s: %u rays, %u entries (longest %zu), %zu checked by brute force: %zu hits, %zu missing\n",
+            what, n, bins->entry_count, longest, checked, hits, missing);
+    CHECK_MSG(unwritten == 0 && unordered == 0, "%s: %zu entries unwritten, %zu out of order", what, unwritten,
+              unordered);
+    CHECK_MSG(longest == bins->longest, "%s: longest list %zu, plan said %u", what, longest, bins->longest);
+    CHECK_MSG(hits > checked / 4 && missing == 0, "%s: %zu of %zu hit triangles missing from lists", what, missing,
+              hits);
+    return most;
+}
+
 /* The host's lists themselves (src/ray_bin.h), on a scene's own triangles: every slot written,
  * each list in the triangles' order without repeats, and every triangle the watertight test
  * hits (brute force over all of them) in the list of each ray checked: camera rays, rays at the
  * triangles' corners and edge midpoints, and camera rays moved off their grid with a band of
  * rows left without rays (each of a camera's cells holds one ray, whose bounds are a point: a
  * test that took a cell's low bounds for its high ones would pass there; moved, a cell's rays
- * spread over it, and it misses 401 hit triangles); and the same lists on any number of
- * threads. */
+ * spread over it, and it misses 401 hit triangles), a turned camera and one that sees the mesh
+ * in its lowest rows alone (the cameras' rays found on a lattice, the others not); and the same
+ * lists on any number of threads. */
 static void ray_bin_lists_hold_every_triangle_a_ray_hits(void)
 {
     vkrt_scene *s = make_scene(cpu, VKRT_MODELS_DIR "/meshes/dragon_11k.obj", VKRT_BVH_BUILDER_DEFAULT);
@@ -1535,6 +1584,13 @@ static void ray_bin_lists_hold_every_triangle_a_ray_hits(void)
     const vkrt_camera turned_camera = { .eye = { 0.9f, 0.5f, 1.1f }, .target = { 0.05f, -0.02f, 0.0f },
                                         .up = { 0.3f, 1.0f, 0.1f }, .fov_y_degrees = 50.0f };
     CHECK(vkrt_camera_rays(cpu, &turned_camera, 173, 131, turned, turned_n) == VKRT_OK);
+    /* A camera above the mesh, which it sees in its lowest rows alone: past the first 16,384
+     * rays (the plan's first item of rays), where its rays may enter the box. */
+    const size_t above_n = 200 * 150;
+    vkrt_ray *above = malloc(above_n * sizeof *above);
+    const vkrt_camera above_camera = { .eye = { 0.0f, 0.45f, 1.5f }, .target = { 0.0f, 0.45f, 0.0f },
+                                       .fov_y_degrees = 45.0f };
+    CHECK(vkrt_camera_rays(cpu, &above_camera, 200, 150, above, above_n) == VKRT_OK);
     const struct {
         const vkrt_ray *rays;
         size_t n, step;
@@ -1543,14 +1599,15 @@ static void ray_bin_lists_hold_every_triangle_a_ray_hits(void)
     } sets[] = { { camera, camera_n, 3, "camera", true },
                  { corner, corner_n, 13, "corners and edges", false },
                  { moved, camera_n, 3, "camera rays off the grid", false },
-                 { turned, turned_n, 3, "turned camera", true } };
-    const int pass_set[] = { 0, 1, 0, 2, 3 };
+                 { turned, turned_n, 3, "turned camera", true },
+                 { above, above_n, 5, "camera above the mesh", true } };
+    const int pass_set[] = { 0, 1, 0, 2, 3, 4 };
     /* The camera's lists planned first without kept scratch, then with the scratch each plan
      * leaves (the corners' plan after the camera's, the camera's again after theirs): the same
      * lists. */
     ray_bin_scratch *scratch = NULL;
     uint32_t *first_lists = NULL, first_count = 0;
-    for (int pass = 0; pass < 5; pass++) {
+    for (int pass = 0; pass < (int)(sizeof pass_set / sizeof pass_set[0]); pass++) {
         const int set = pass_set[pass];
         const vkrt_ray *rays = sets[set].rays;
         const uint32_t n = (uint32_t)sets[set].n;
@@ -1574,39 +1631,7 @@ static void ray_bin_lists_hold_every_triangle_a_ray_hits(void)
             ray_bins_destroy(&s->ctx->core, &bins);
             continue;
         }
-        size_t unwritten = 0, unordered = 0, missing = 0, hits = 0, checked = 0, longest = 0;
-        for (uint32_t e = 0; e < bins.entry_count; e++) unwritten += entries[e] >= tris;
-        for (uint32_t i = 0; i < n; i++) {
-            uint32_t list[2];
-            ray_bin_list(&bins, i, list);
-            if (list[1] > longest) longest = list[1];
-            for (uint32_t k = 1; k < list[1]; k++) unordered += entries[list[0] + k] <= entries[list[0] + k - 1];
-            if (i % sets[set].step) continue;
-            checked++;
-            vkrt_gpu_ray ray;
-            memcpy(&ray, &rays[i], sizeof ray);
-            if (ray.tmax == 0.0f) ray.tmax = INFINITY;
-            for (uint32_t t = 0; t < tris; t += 4) {
-                const vkrt_gpu_tri *four[4];
-                for (int k = 0; k < 4; k++) four[k] = &s->tris[t + k < tris ? t + k : t];
-                float tt[4], uu[4], vv[4];
-                const unsigned mask = cpu_trace_watertight4_test(&ray, four, false, tt, uu, vv);
-                for (int k = 0; k < 4 && t + k < tris; k++) {
-                    if (!(mask >> k & 1)) continue;
-                    hits++;
-                    bool listed = false;
-                    for (uint32_t e = 0; e < list[1] && !listed; e++) listed = entries[list[0] + e] == t + k;
-                    missing += !listed;
-                }
-            }
-        }
-        fprintf(stderr, "  %s: %u rays, %u entries (longest %zu), %zu checked by brute force: %zu hits, %zu missing\n",
-                sets[set].what, n, bins.entry_count, longest, checked, hits, missing);
-        CHECK_MSG(unwritten == 0 && unordered == 0, "%s: %zu entries unwritten, %zu out of order", sets[set].what,
-                  unwritten, unordered);
-        CHECK_MSG(longest == bins.longest, "%s: longest list %zu, plan said %u", sets[set].what, longest, bins.longest);
-        CHECK_MSG(hits > checked / 4 && missing == 0, "%s: %zu of %zu hit triangles missing from lists",
-                  sets[set].what, missing, hits);
+        lists_hold_hits(s, rays, n, sets[set].step, &bins, entries, sets[set].what);
         if (pass == 0) {
             first_lists = entries;
             first_count = bins.entry_count;
@@ -1640,10 +1665,94 @@ static void ray_bin_lists_hold_every_triangle_a_ray_hits(void)
     free(first_lists);
     free(camera);
     free(turned);
+    free(above);
     free(moved);
     free(corner);
     free(pos);
     vkrt_scene_destroy(s);
+}
+
+/* On a lattice the count tests each triangle's edges at its span's cells in the grid's units,
+ * four triangles together where a span holds up to 64 cells and row by row where it holds more
+ * (src/ray_bin.c): the teapot from close by, whose nearest triangles have hits for over 64 of
+ * its 160 x 120 rays, every ray checked by brute force. */
+static void ray_bin_lattice_lists_hold_the_hits_of_big_triangles(void)
+{
+    vkrt_scene *s = make_scene(cpu, VKRT_MODELS_DIR "/meshes/teapot.obj", VKRT_BVH_BUILDER_DEFAULT);
+    if (!s) return;
+    const uint32_t w = 160, h = 120, n = w * h;
+    const vkrt_camera close = { .eye = { 0.1f, 0.0f, 0.62f }, .target = { 0.1f, 0.0f, 0.0f }, .fov_y_degrees = 100.0f };
+    vkrt_ray *rays = malloc((size_t)n * sizeof *rays);
+    CHECK(vkrt_camera_rays(cpu, &close, w, h, rays, n) == VKRT_OK);
+    ray_bins bins;
+    ray_bin_outcome outcome;
+    const ray_bin_limits limits = { .max_entries = 64u * n, .max_list = 1u << 20 };
+    CHECK(ray_bin_plan(&s->ctx->core, NULL, rays, n, s->tris, s->bvh.tri_count, &s->bvh.nodes[0], limits, 2, &bins,
+                       &outcome) == VKRT_OK);
+    CHECK_MSG(outcome == RAY_BIN_BUILT && bins.on_lattice, "outcome %d, on a lattice %d", (int)outcome,
+              (int)bins.on_lattice);
+    if (outcome == RAY_BIN_BUILT) {
+        uint32_t *entries = malloc((size_t)(bins.entry_count ? bins.entry_count : 1) * sizeof *entries);
+        memset(entries, 0xFF, (size_t)bins.entry_count * sizeof *entries);
+        ray_bin_fill(&bins, entries);
+        const size_t most = lists_hold_hits(s, rays, n, 1, &bins, entries, "teapot close up");
+        CHECK_MSG(most > 64, "the largest triangle has hits for %zu rays: none spans over 64 cells", most);
+        free(entries);
+        ray_bins_destroy(&s->ctx->core, &bins);
+    }
+    free(rays);
+    vkrt_scene_destroy(s);
+}
+
+/* The lattice's count against rays that graze its triangles: a bumpy sheet whose corners lie on
+ * every third of a camera's rays (each at its own depth), so that its edges pass through the
+ * pixel centres between them along rows, columns and diagonals, up to rounding. The watertight
+ * test decides those rays' hits by a few ulps; the lists must hold every triangle it gives one
+ * (without the count's tolerances they miss some). */
+static void ray_bin_lattice_lists_hold_grazing_hits(void)
+{
+    const uint32_t w = 97, h = 73, n = w * h, cols = w / 3 + 1, rows = h / 3 + 1;
+    const vkrt_camera view = { .eye = { 0.0f, 0.0f, 1.5f }, .target = { 0.0f, 0.0f, 0.0f }, .fov_y_degrees = 45.0f };
+    vkrt_ray *rays = malloc((size_t)n * sizeof *rays);
+    CHECK(vkrt_camera_rays(cpu, &view, w, h, rays, n) == VKRT_OK);
+    float *pos = malloc((size_t)cols * rows * 3 * sizeof *pos);
+    uint32_t *idx = malloc((size_t)(cols - 1) * (rows - 1) * 6 * sizeof *idx), tris = 0;
+    for (uint32_t y = 0; y < rows; y++)
+        for (uint32_t x = 0; x < cols; x++) {
+            const vkrt_ray *r = &rays[(size_t)(3 * y) * w + 3 * x];
+            const float depth = 1.2f + 0.05f * (float)((x * 7 + y * 3) % 5);
+            for (int k = 0; k < 3; k++) pos[(y * cols + x) * 3 + k] = r->origin[k] + r->dir[k] * depth;
+        }
+    for (uint32_t y = 0; y + 1 < rows; y++)
+        for (uint32_t x = 0; x + 1 < cols; x++) {
+            const uint32_t a = y * cols + x, b = a + 1, c = a + cols, d = c + 1;
+            /* The diagonals both ways, in a checkerboard. */
+            const uint32_t quad[2][6] = { { a, b, d, a, d, c }, { a, b, c, b, d, c } };
+            memcpy(idx + 3 * tris, quad[(x + y) % 2], sizeof quad[0]);
+            tris += 2;
+        }
+    vkrt_scene *s = mesh_scene(cpu, pos, cols * rows, idx, tris, VKRT_BVH_BUILDER_DEFAULT);
+    if (s) {
+        ray_bins bins;
+        ray_bin_outcome outcome;
+        const ray_bin_limits limits = { .max_entries = 64u * n, .max_list = 1u << 20 };
+        CHECK(ray_bin_plan(&s->ctx->core, NULL, rays, n, s->tris, s->bvh.tri_count, &s->bvh.nodes[0], limits, 2,
+                           &bins, &outcome) == VKRT_OK);
+        CHECK_MSG(outcome == RAY_BIN_BUILT && bins.on_lattice, "outcome %d, on a lattice %d", (int)outcome,
+                  (int)bins.on_lattice);
+        if (outcome == RAY_BIN_BUILT) {
+            uint32_t *entries = malloc((size_t)(bins.entry_count ? bins.entry_count : 1) * sizeof *entries);
+            memset(entries, 0xFF, (size_t)bins.entry_count * sizeof *entries);
+            ray_bin_fill(&bins, entries);
+            lists_hold_hits(s, rays, n, 1, &bins, entries, "grazed sheet");
+            free(entries);
+            ray_bins_destroy(&s->ctx->core, &bins);
+        }
+        vkrt_scene_destroy(s);
+    }
+    free(idx);
+    free(pos);
+    free(rays);
 }
 
 /* The same mesh twice: *wide traced through the wide BVH, *binary kept to the binary one (the
@@ -2548,6 +2657,8 @@ int main(void)
     RUN(gpu_trace_rays_match_cpu_and_naive);
     RUN(gpu_trace_rays_answer_rays_missing_the_scene_box_on_the_host);
     RUN(ray_bin_lists_hold_every_triangle_a_ray_hits);
+    RUN(ray_bin_lattice_lists_hold_the_hits_of_big_triangles);
+    RUN(ray_bin_lattice_lists_hold_grazing_hits);
     RUN(ray_bin_says_why_rays_do_not_suit);
     RUN(ray_bin_gives_a_cell_to_every_ray_the_box_test_lets_in);
     RUN(ray_bin_camera_plan_lists_as_the_camera_rays_do);
