@@ -20,8 +20,8 @@ typedef struct core {
     /* Tests: a work pool starts at most this many threads in all, the caller included, as if
      * the others had failed to start (0, the default: no limit). */
     uint32_t test_thread_cap;
-    /* Tests: the CPU tracer runs its baseline code even where the host could run its x86-64-v3
-     * build (cpu_trace_isa). */
+    /* Tests: the CPU tracer and the ray lists' plan run their baseline code even where the host
+     * could run their x86-64-v3 build (cpu_trace_isa). */
     bool test_cpu_baseline;
     char last_error[CORE_ERROR_SIZE];
 } core;

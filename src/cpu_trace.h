@@ -80,9 +80,10 @@ static inline vkrt_hit cpu_trace_miss(void)
  * to by test_cpu_trace. */
 bool cpu_trace_ray_enters_box(const vkrt_ray *ray, const vkrt_gpu_node *box);
 
-/* The machine code cpu_trace_render and cpu_trace_rays run: the baseline build (SSE2), or the
- * same source built for x86-64-v3 (AVX2, BMI2, FMA unused: the same bits), where the library
- * was built with it and the host has it, unless c->test_cpu_baseline asks for the baseline. */
+/* The machine code cpu_trace_render and cpu_trace_rays run (and ray_bin.c's plan): the baseline
+ * build (SSE2), or the same source built for x86-64-v3 (AVX2, BMI2, FMA unused: the same bits),
+ * where the library was built with it and the host has it, unless c->test_cpu_baseline asks for
+ * the baseline. */
 typedef enum cpu_trace_code { CPU_TRACE_BASELINE, CPU_TRACE_X86_64_V3 } cpu_trace_code;
 cpu_trace_code cpu_trace_isa(const core *c);
 const char *cpu_trace_isa_name(cpu_trace_code code);

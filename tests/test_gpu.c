@@ -1536,7 +1536,7 @@ static size_t lists_hold_hits(const vkrt_scene *s, const vkrt_ray *rays, uint32_
  * test that took a cell's low bounds for its high ones would pass there; moved, a cell's rays
  * spread over it, and it misses 401 hit triangles), a turned camera and one that sees the mesh
  * in its lowest rows alone (the cameras' rays found on a lattice, the others not); and the same
- * lists on any number of threads. */
+ * lists on any number of threads, and from the baseline build as from the x86-64-v3 one. */
 static void ray_bin_lists_hold_every_triangle_a_ray_hits(void)
 {
     vkrt_scene *s = make_scene(cpu, VKRT_MODELS_DIR "/meshes/dragon_11k.obj", VKRT_BVH_BUILDER_DEFAULT);
@@ -1663,6 +1663,36 @@ static void ray_bin_lists_hold_every_triangle_a_ray_hits(void)
         ray_bins_destroy(&s->ctx->core, &bins);
     }
     free(first_lists);
+    /* The x86-64-v3 build of the plan and the fill (where the host runs it, as the CPU tracer
+     * does: cpu_trace_isa) lists what the baseline build does, on the lattice and off it. */
+    fprintf(stderr, "  the lists' plan runs the %s code here\n", cpu_trace_isa_name(cpu_trace_isa(&s->ctx->core)));
+    const struct {
+        const vkrt_ray *rays;
+        size_t n;
+    } isa_sets[] = { { camera, camera_n }, { moved, camera_n }, { corner, corner_n } };
+    for (size_t k = 0; k < sizeof isa_sets / sizeof isa_sets[0]; k++) {
+        uint32_t *lists[2] = { NULL, NULL }, count[2] = { 0, 0 };
+        for (int baseline = 0; baseline < 2; baseline++) {
+            s->ctx->core.test_cpu_baseline = baseline;
+            ray_bins bins;
+            ray_bin_outcome outcome;
+            const ray_bin_limits limits = { .max_entries = 64u * (uint32_t)isa_sets[k].n, .max_list = 1u << 20 };
+            CHECK(ray_bin_plan(&s->ctx->core, NULL, isa_sets[k].rays, (uint32_t)isa_sets[k].n, s->tris, tris, &box,
+                               limits, 2, &bins, &outcome) == VKRT_OK);
+            CHECK_MSG(outcome == RAY_BIN_BUILT, "set %zu: outcome %d", k, (int)outcome);
+            if (outcome != RAY_BIN_BUILT) continue;
+            lists[baseline] = malloc((size_t)(bins.entry_count ? bins.entry_count : 1) * sizeof *lists[baseline]);
+            ray_bin_fill(&bins, lists[baseline]);
+            count[baseline] = bins.entry_count;
+            ray_bins_destroy(&s->ctx->core, &bins);
+        }
+        s->ctx->core.test_cpu_baseline = false;
+        CHECK_MSG(lists[0] && lists[1] && count[0] == count[1] &&
+                      memcmp(lists[0], lists[1], (size_t)count[0] * sizeof *lists[0]) == 0,
+                  "set %zu: the baseline build's lists differ (%u entries against %u)", k, count[1], count[0]);
+        free(lists[0]);
+        free(lists[1]);
+    }
     free(camera);
     free(turned);
     free(above);
