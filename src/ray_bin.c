@@ -430,6 +430,7 @@ static void cells_place_item(void *job, uint32_t item)
 typedef struct projected4 {
     float box[4][4];        /* a min, a max, b min, b max */
     int32_t span[4][4];     /* the box's first and last column, first and last row */
+    float across[2][4];     /* the span's columns and rows (not over 0 where it holds no cell) */
     float nx[3][4], ny[3][4], c[3][4];
 } projected4;
 
@@ -439,9 +440,10 @@ typedef struct projected4 {
  * c(y) - offset_min, with room for the rounding of these differences (eight ulps of them, and
  * 2^-8 of a cell). The last is first - 1 (or -1) where no cell is reached; a NaN counts as 0 (a
  * corner all but on the origin's plane, which the plan turns away): MAXPS gives its second
- * operand for it. The first also as a float (first_f). */
+ * operand for it. The first also as a float (first_f), and the cells from first to last
+ * (across). */
 static void spans_of4(float4 x, float4 y, float x0, float scale, uint32_t cells, float offset_min,
-                      float offset_max, int32_t first[4], int32_t last[4], float4 *first_f)
+                      float offset_max, int32_t first[4], int32_t last[4], float4 *first_f, float across[4])
 {
     const float4 zero = f4_set1(0.0f), top = f4_set1((float)(cells - 1)), one = f4_set1(1.0f);
     const float4 dx = f4_sub(grid_coord4(x, x0, scale), f4_set1(offset_max));
@@ -452,8 +454,10 @@ static void spans_of4(float4 x, float4 y, float x0, float scale, uint32_t cells,
     const float4 vc = f4_min(f4_max(v, zero), top), wc = f4_min(f4_max(w, zero), top);
     const float4 down = f4_trunc(vc); /* vc >= 0: its floor */
     *first_f = f4_add(down, f4_and(f4_lt(down, vc), one));
+    const float4 last_f = f4_select(f4_lt(w, zero), f4_set1(-1.0f), f4_trunc(wc));
     f4_truncate(*first_f, first);
-    f4_truncate(f4_select(f4_lt(w, zero), f4_set1(-1.0f), f4_trunc(wc)), last);
+    f4_truncate(last_f, last);
+    f4_store(across, f4_add(f4_sub(last_f, *first_f), one));
 }
 
 /* The edges of four triangles of corners (px, py) (a lane each), into out's nx, ny and c: inward
@@ -532,9 +536,9 @@ static unsigned project_triangles(const ray_bin_job *j, uint32_t t, uint32_t end
     for (int k = 0; k < 4; k++) f4_store(out->box[k], box[k]);
     float4 first_x, first_y;
     spans_of4(box[0], box[1], g->a0, g->sa, g->gx, j->offset_min[0], j->offset_max[0], out->span[0], out->span[1],
-              &first_x);
+              &first_x, out->across[0]);
     spans_of4(box[2], box[3], g->b0, g->sb, g->gy, j->offset_min[1], j->offset_max[1], out->span[2], out->span[3],
-              &first_y);
+              &first_y, out->across[1]);
     const float4 zero = f4_set1(0.0f);
     if (!j->raster) {
         /* Distances within `tolerance` of the triangle count as inside: the widening, and the
@@ -704,29 +708,23 @@ static bool count_triangle(ray_bin_job *j, uint32_t t, const tri_test *s, uint32
     return true;
 }
 
-/* On a lattice (raster), the cells of the spans of the lanes of p in `lanes` (each of at most 64
- * cells) that pass their edges: as count_triangle's masks (bit width dy + dx), into cells[].
+/* On a lattice (raster), the cells of the spans of p's lanes (lane k's w[k] wide and n[k] cells,
+ * at most 64; none where n[k] is 0) that pass their edges: as count_triangle's masks (bit
+ * width dy + dx), into cells[].
  * The four triangles go together, a cell of each a step, so that a span's shape takes no branch:
  * most of a detailed mesh's are of one to four cells, in no order. */
-static void raster_spans4(const projected4 *p, unsigned lanes, const uint32_t widths[4], const uint32_t spans[4],
-                          uint64_t cells[4])
+static void raster_spans4(const projected4 *p, float4 w, float4 n, uint64_t cells[4])
 {
-    float width[4], count[4];
-    uint32_t most = 0;
-    for (uint32_t k = 0; k < 4; k++) {
-        const bool on = lanes >> k & 1u;
-        width[k] = on ? (float)widths[k] : 1.0f;
-        count[k] = on ? (float)spans[k] : 0.0f;
-        most = on && spans[k] > most ? spans[k] : most;
-        cells[k] = 0;
-    }
+    /* The most cells of a lane: n's largest, the least of -n. */
+    const uint32_t most = (uint32_t)-f4_min_lane(f4_sub(f4_set1(0.0f), n));
+    for (uint32_t k = 0; k < 4; k++) cells[k] = 0;
     tri_test t;
     for (int k = 0; k < 3; k++) {
         t.nx[k] = f4_load(p->nx[k]);
         t.ny[k] = f4_load(p->ny[k]);
         t.c[k] = f4_load(p->c[k]);
     }
-    const float4 one = f4_set1(1.0f), w = f4_load(width), n = f4_load(count);
+    const float4 one = f4_set1(1.0f);
     float4 dx = f4_set1(0.0f), dy = dx, at = dx;
     for (uint32_t i = 0; i < most; i++) {
         const unsigned in = cells_raster4(&t, dx, dy) & f4_bits(f4_lt(at, n));
@@ -746,20 +744,20 @@ static bool count_raster4(ray_bin_job *j, uint32_t t4, uint32_t lanes, const pro
                           uint64_t *visited, uint64_t budget)
 {
     const uint32_t stride = j->g.stride;
-    uint32_t widths[4], spans[4];
-    unsigned small = 0, big = 0;
-    for (uint32_t k = 0; k < 4; k++) {
-        const int32_t w = p->span[1][k] - p->span[0][k] + 1, h = p->span[3][k] - p->span[2][k] + 1;
-        /* Between the rays (w or h 0): no cell. */
-        const bool has = k < lanes && w > 0 && h > 0;
-        const uint64_t n = has ? (uint64_t)w * (uint64_t)h : 0;
-        widths[k] = has ? (uint32_t)w : 1u;
-        spans[k] = n <= 64 ? (uint32_t)n : 0u;
-        small |= (unsigned)(has && n <= 64) << k;
-        big |= (unsigned)(n > 64) << k;
-    }
+    /* The spans' shapes in float (exact: a grid's side is at most 2^22 cells), without a branch
+     * or a store a lane: between the rays (no column or no row) no cell, so width 1 and none. */
+    const float4 one = f4_set1(1.0f), zero = f4_set1(0.0f);
+    const float4 across = f4_load(p->across[0]), down = f4_load(p->across[1]);
+    const float4 has = f4_and(f4_mask((1u << lanes) - 1), f4_and(f4_gt(across, zero), f4_gt(down, zero)));
+    const float4 n = f4_mul(across, down);
+    const float4 small_mask = f4_and(has, f4_le(n, f4_set1(64.0f)));
+    const unsigned small = f4_bits(small_mask), big = f4_bits(has) & ~small;
+    const float4 w = f4_select(has, across, one), n_small = f4_and(small_mask, n);
+    int32_t widths[4], spans[4];
+    f4_truncate(w, widths);
+    f4_truncate(n_small, spans);
     uint64_t cells[4];
-    raster_spans4(p, small, widths, spans, cells);
+    raster_spans4(p, w, n_small, cells);
     for (uint32_t k = 0; k < lanes; k++) {
         const uint32_t t = t4 + k;
         if (big >> k & 1u) {
@@ -771,14 +769,15 @@ static bool count_raster4(ray_bin_job *j, uint32_t t4, uint32_t lanes, const pro
         const uint32_t cell0 = small >> k & 1u ? (uint32_t)p->span[2][k] * stride + (uint32_t)p->span[0][k] : 0u;
         uint64_t left = cells[k];
         /* The first cell without a branch (most triangles have one or none): none adds 0. */
-        const uint32_t at = cell0 + span_cell((uint32_t)__builtin_ctzll(left | 1ull << 63), widths[k], stride);
+        const uint32_t width = (uint32_t)widths[k];
+        const uint32_t at = cell0 + span_cell((uint32_t)__builtin_ctzll(left | 1ull << 63), width, stride);
         count[left ? at : cell0] += left != 0;
         for (left &= left - 1; left; left &= left - 1)
-            count[cell0 + span_cell((uint32_t)__builtin_ctzll(left), widths[k], stride)]++;
+            count[cell0 + span_cell((uint32_t)__builtin_ctzll(left), width, stride)]++;
         j->tri_cell[t] = cell0;
         j->tri_cells[t] = cells[k];
-        j->tri_width[t] = (uint8_t)widths[k];
-        *visited += spans[k];
+        j->tri_width[t] = (uint8_t)width;
+        *visited += (uint32_t)spans[k];
     }
     return true;
 }
