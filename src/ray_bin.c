@@ -120,7 +120,7 @@ struct ray_bin_job {
     float offset_min[2], offset_max[2];
     /* On a lattice the rays of cell (x, y) lie in the box of centre (x, y) + ray_centre and half
      * widths ray_half (from the offsets), and the count tests that box against a triangle's edges
-     * in the grid's units (raster_cells4): no cell's bounds are read, nor found. */
+     * in the grid's units (cells_raster4): no cell's bounds are read, nor found. */
     bool raster;
     float ray_centre[2], ray_half[2];
     ray_item_result *ray_results;
