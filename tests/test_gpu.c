@@ -1702,6 +1702,28 @@ static void ray_bin_lists_hold_every_triangle_a_ray_hits(void)
     vkrt_scene_destroy(s);
 }
 
+/* Plans and fills the lists of rays[0 .. n) for scene s, which must find them on a lattice, and
+ * checks every ray's by brute force (lists_hold_hits): the most rays one triangle has hits for,
+ * 0 where no lists were built. */
+static size_t lattice_lists_hold_hits(vkrt_scene *s, const vkrt_ray *rays, uint32_t n, const char *what)
+{
+    ray_bins bins;
+    ray_bin_outcome outcome;
+    const ray_bin_limits limits = { .max_entries = 64u * n, .max_list = 1u << 20 };
+    CHECK(ray_bin_plan(&s->ctx->core, NULL, rays, n, s->tris, s->bvh.tri_count, &s->bvh.nodes[0], limits, 2, &bins,
+                       &outcome) == VKRT_OK);
+    CHECK_MSG(outcome == RAY_BIN_BUILT && bins.on_lattice, "%s: outcome %d, on a lattice %d", what, (int)outcome,
+              (int)bins.on_lattice);
+    if (outcome != RAY_BIN_BUILT) return 0;
+    uint32_t *entries = malloc((size_t)(bins.entry_count ? bins.entry_count : 1) * sizeof *entries);
+    memset(entries, 0xFF, (size_t)bins.entry_count * sizeof *entries);
+    ray_bin_fill(&bins, entries);
+    const size_t most = lists_hold_hits(s, rays, n, 1, &bins, entries, what);
+    free(entries);
+    ray_bins_destroy(&s->ctx->core, &bins);
+    return most;
+}
+
 /* On a lattice the count tests each triangle's edges at its span's cells in the grid's units,
  * four triangles together where a span holds up to 64 cells and row by row where it holds more
  * (src/ray_bin.c): the teapot from close by, whose nearest triangles have hits for over 64 of
@@ -1714,22 +1736,8 @@ static void ray_bin_lattice_lists_hold_the_hits_of_big_triangles(void)
     const vkrt_camera close = { .eye = { 0.1f, 0.0f, 0.62f }, .target = { 0.1f, 0.0f, 0.0f }, .fov_y_degrees = 100.0f };
     vkrt_ray *rays = malloc((size_t)n * sizeof *rays);
     CHECK(vkrt_camera_rays(cpu, &close, w, h, rays, n) == VKRT_OK);
-    ray_bins bins;
-    ray_bin_outcome outcome;
-    const ray_bin_limits limits = { .max_entries = 64u * n, .max_list = 1u << 20 };
-    CHECK(ray_bin_plan(&s->ctx->core, NULL, rays, n, s->tris, s->bvh.tri_count, &s->bvh.nodes[0], limits, 2, &bins,
-                       &outcome) == VKRT_OK);
-    CHECK_MSG(outcome == RAY_BIN_BUILT && bins.on_lattice, "outcome %d, on a lattice %d", (int)outcome,
-              (int)bins.on_lattice);
-    if (outcome == RAY_BIN_BUILT) {
-        uint32_t *entries = malloc((size_t)(bins.entry_count ? bins.entry_count : 1) * sizeof *entries);
-        memset(entries, 0xFF, (size_t)bins.entry_count * sizeof *entries);
-        ray_bin_fill(&bins, entries);
-        const size_t most = lists_hold_hits(s, rays, n, 1, &bins, entries, "teapot close up");
-        CHECK_MSG(most > 64, "the largest triangle has hits for %zu rays: none spans over 64 cells", most);
-        free(entries);
-        ray_bins_destroy(&s->ctx->core, &bins);
-    }
+    const size_t most = lattice_lists_hold_hits(s, rays, n, "teapot close up");
+    CHECK_MSG(most > 64, "the largest triangle has hits for %zu rays: none spans over 64 cells", most);
     free(rays);
     vkrt_scene_destroy(s);
 }
@@ -1763,21 +1771,7 @@ static void ray_bin_lattice_lists_hold_grazing_hits(void)
         }
     vkrt_scene *s = mesh_scene(cpu, pos, cols * rows, idx, tris, VKRT_BVH_BUILDER_DEFAULT);
     if (s) {
-        ray_bins bins;
-        ray_bin_outcome outcome;
-        const ray_bin_limits limits = { .max_entries = 64u * n, .max_list = 1u << 20 };
-        CHECK(ray_bin_plan(&s->ctx->core, NULL, rays, n, s->tris, s->bvh.tri_count, &s->bvh.nodes[0], limits, 2,
-                           &bins, &outcome) == VKRT_OK);
-        CHECK_MSG(outcome == RAY_BIN_BUILT && bins.on_lattice, "outcome %d, on a lattice %d", (int)outcome,
-                  (int)bins.on_lattice);
-        if (outcome == RAY_BIN_BUILT) {
-            uint32_t *entries = malloc((size_t)(bins.entry_count ? bins.entry_count : 1) * sizeof *entries);
-            memset(entries, 0xFF, (size_t)bins.entry_count * sizeof *entries);
-            ray_bin_fill(&bins, entries);
-            lists_hold_hits(s, rays, n, 1, &bins, entries, "grazed sheet");
-            free(entries);
-            ray_bins_destroy(&s->ctx->core, &bins);
-        }
+        lattice_lists_hold_hits(s, rays, n, "grazed sheet");
         vkrt_scene_destroy(s);
     }
     free(idx);
