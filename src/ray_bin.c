@@ -639,18 +639,18 @@ static unsigned cells_raster4(const tri_test *t, float4 dx, float4 dy)
  * x - x0. */
 static uint64_t row_may_hit(const ray_bin_job *j, const tri_test *t, uint32_t y, uint32_t x0, uint32_t x1)
 {
+    uint64_t bits = 0;
     if (j->raster) {
         const float4 dy = f4_set1((float)(y - t->y0)), steps = f4_set(0.0f, 1.0f, 2.0f, 3.0f);
-        uint64_t bits = 0;
         for (uint32_t x = x0; x <= x1; x += 4)
             bits |= (uint64_t)cells_raster4(t, f4_add(f4_set1((float)(x - t->x0)), steps), dy) << (x - x0);
-        const uint32_t width = x1 - x0 + 1;
-        return width >= 64 ? bits : bits & ((1ull << width) - 1);
+    } else {
+        /* From the block that holds x0: its cells before x0 shifted out. */
+        const size_t row = (size_t)y * j->g.stride;
+        bits = cells_may_hit4(j, (row + x0) / 4, t) >> (x0 % 4);
+        for (uint32_t x = (x0 | 3u) + 1; x <= x1; x += 4)
+            bits |= (uint64_t)cells_may_hit4(j, (row + x) / 4, t) << (x - x0);
     }
-    /* From the block that holds x0: its cells before x0 shifted out. */
-    const size_t row = (size_t)y * j->g.stride;
-    uint64_t bits = cells_may_hit4(j, (row + x0) / 4, t) >> (x0 % 4);
-    for (uint32_t x = (x0 | 3u) + 1; x <= x1; x += 4) bits |= (uint64_t)cells_may_hit4(j, (row + x) / 4, t) << (x - x0);
     const uint32_t width = x1 - x0 + 1;
     return width >= 64 ? bits : bits & ((1ull << width) - 1);
 }

@@ -1528,6 +1528,26 @@ static size_t lists_hold_hits(const vkrt_scene *s, const vkrt_ray *rays, uint32_
     return most;
 }
 
+/* The lists of rays[0 .. n) for scene s's triangles in box, planned on `threads` threads and
+ * filled (*out_count entries); NULL, with a failed check, where the plan did not build them. */
+static uint32_t *planned_lists(vkrt_scene *s, const vkrt_ray *rays, uint32_t n, const vkrt_gpu_node *box,
+                               uint32_t threads, uint32_t *out_count)
+{
+    ray_bins bins;
+    ray_bin_outcome outcome;
+    const ray_bin_limits limits = { .max_entries = 64u * n, .max_list = 1u << 20 };
+    CHECK(ray_bin_plan(&s->ctx->core, NULL, rays, n, s->tris, s->bvh.tri_count, box, limits, threads, &bins,
+                       &outcome) == VKRT_OK);
+    CHECK_MSG(outcome == RAY_BIN_BUILT, "%u rays on %u threads: outcome %d", n, threads, (int)outcome);
+    *out_count = 0;
+    if (outcome != RAY_BIN_BUILT) return NULL;
+    uint32_t *entries = malloc((size_t)(bins.entry_count ? bins.entry_count : 1) * sizeof *entries);
+    ray_bin_fill(&bins, entries);
+    *out_count = bins.entry_count;
+    ray_bins_destroy(&s->ctx->core, &bins);
+    return entries;
+}
+
 /* The host's lists themselves (src/ray_bin.h), on a scene's own triangles: every slot written,
  * each list in the triangles' order without repeats, and every triangle the watertight test
  * hits (brute force over all of them) in the list of each ray checked: camera rays, rays at the
@@ -1647,20 +1667,12 @@ static void ray_bin_lists_hold_every_triangle_a_ray_hits(void)
      * threads than cores here), the camera's lists are the first pass's on two threads. */
     const uint32_t thread_counts[] = { 1, 3, 5, 8 };
     for (size_t k = 0; k < sizeof thread_counts / sizeof thread_counts[0] && first_lists; k++) {
-        ray_bins bins;
-        ray_bin_outcome outcome;
-        const ray_bin_limits limits = { .max_entries = 64u * (uint32_t)camera_n, .max_list = 1u << 20 };
-        CHECK(ray_bin_plan(&s->ctx->core, NULL, camera, (uint32_t)camera_n, s->tris, tris, &box, limits,
-                           thread_counts[k], &bins, &outcome) == VKRT_OK);
-        CHECK_MSG(outcome == RAY_BIN_BUILT, "%u threads: outcome %d", thread_counts[k], (int)outcome);
-        if (outcome != RAY_BIN_BUILT) continue;
-        uint32_t *entries = malloc((size_t)(bins.entry_count ? bins.entry_count : 1) * sizeof *entries);
-        ray_bin_fill(&bins, entries);
-        CHECK_MSG(bins.entry_count == first_count && memcmp(entries, first_lists, first_count * sizeof *entries) == 0,
-                  "%u threads: the camera's lists differ (%u entries, %u on two threads)", thread_counts[k],
-                  bins.entry_count, first_count);
+        uint32_t count;
+        uint32_t *entries = planned_lists(s, camera, (uint32_t)camera_n, &box, thread_counts[k], &count);
+        CHECK_MSG(entries && count == first_count && memcmp(entries, first_lists, first_count * sizeof *entries) == 0,
+                  "%u threads: the camera's lists differ (%u entries, %u on two threads)", thread_counts[k], count,
+                  first_count);
         free(entries);
-        ray_bins_destroy(&s->ctx->core, &bins);
     }
     free(first_lists);
     /* The x86-64-v3 build of the plan and the fill (where the host runs it, as the CPU tracer
@@ -1671,20 +1683,10 @@ static void ray_bin_lists_hold_every_triangle_a_ray_hits(void)
         size_t n;
     } isa_sets[] = { { camera, camera_n }, { moved, camera_n }, { corner, corner_n } };
     for (size_t k = 0; k < sizeof isa_sets / sizeof isa_sets[0]; k++) {
-        uint32_t *lists[2] = { NULL, NULL }, count[2] = { 0, 0 };
+        uint32_t *lists[2], count[2] = { 0, 0 };
         for (int baseline = 0; baseline < 2; baseline++) {
             s->ctx->core.test_cpu_baseline = baseline;
-            ray_bins bins;
-            ray_bin_outcome outcome;
-            const ray_bin_limits limits = { .max_entries = 64u * (uint32_t)isa_sets[k].n, .max_list = 1u << 20 };
-            CHECK(ray_bin_plan(&s->ctx->core, NULL, isa_sets[k].rays, (uint32_t)isa_sets[k].n, s->tris, tris, &box,
-                               limits, 2, &bins, &outcome) == VKRT_OK);
-            CHECK_MSG(outcome == RAY_BIN_BUILT, "set %zu: outcome %d", k, (int)outcome);
-            if (outcome != RAY_BIN_BUILT) continue;
-            lists[baseline] = malloc((size_t)(bins.entry_count ? bins.entry_count : 1) * sizeof *lists[baseline]);
-            ray_bin_fill(&bins, lists[baseline]);
-            count[baseline] = bins.entry_count;
-            ray_bins_destroy(&s->ctx->core, &bins);
+            lists[baseline] = planned_lists(s, isa_sets[k].rays, (uint32_t)isa_sets[k].n, &box, 2, &count[baseline]);
         }
         s->ctx->core.test_cpu_baseline = false;
         CHECK_MSG(lists[0] && lists[1] && count[0] == count[1] &&
