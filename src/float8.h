@@ -1,5 +1,6 @@
-/* Eight float lanes for the CPU tracer's packets (cpu_trace_packet8.h): one AVX register where
- * the file is compiled for AVX2 (the x86-64-v3 build of src/cpu_trace.c), else two float4
+/* Eight float lanes for the CPU tracer's packets (cpu_trace_packet8.h) and the binned lists'
+ * triangles (ray_bin.c): one AVX register where the file is compiled for AVX2 (the x86-64-v3
+ * builds of src/cpu_trace.c and src/ray_bin.c), else two float4
  * halves (SSE2, or float4.h's plain-C twin). Every operation is float4.h's, lane for lane, so
  * both forms give the same bits and the two builds of the tracer the same hits
  * (tests/test_float4.c holds each form to the scalar expressions). */
@@ -18,6 +19,11 @@ static inline float8 f8_set(float a, float b, float c, float d, float e, float f
     return _mm256_setr_ps(a, b, c, d, e, f, g, h);
 }
 static inline float8 f8_join(float4 lo, float4 hi) { return _mm256_set_m128(hi, lo); }
+static inline float8 f8_load(const float *p) { return _mm256_loadu_ps(p); }
+/* As f4_truncate and f4_trunc: each lane toward zero, as int32 (0x80000000 outside their range)
+ * and as a float (lanes within +-2^31 only). */
+static inline void f8_truncate(float8 a, int32_t *out) { _mm256_storeu_si256((__m256i *)(void *)out, _mm256_cvttps_epi32(a)); }
+static inline float8 f8_trunc(float8 a) { return _mm256_cvtepi32_ps(_mm256_cvttps_epi32(a)); }
 static inline void f8_store(float *p, float8 a) { _mm256_storeu_ps(p, a); }
 static inline float8 f8_set1(float x) { return _mm256_set1_ps(x); }
 
@@ -76,6 +82,13 @@ static inline float8 f8_set(float a, float b, float c, float d, float e, float f
     return (float8){ f4_set(a, b, c, d), f4_set(e, f, g, h) };
 }
 static inline float8 f8_join(float4 lo, float4 hi) { return (float8){ lo, hi }; }
+static inline float8 f8_load(const float *p) { return (float8){ f4_load(p), f4_load(p + 4) }; }
+static inline void f8_truncate(float8 a, int32_t *out)
+{
+    f4_truncate(a.lo, out);
+    f4_truncate(a.hi, out + 4);
+}
+static inline float8 f8_trunc(float8 a) { return (float8){ f4_trunc(a.lo), f4_trunc(a.hi) }; }
 static inline void f8_store(float *p, float8 a)
 {
     f4_store(p, a.lo);

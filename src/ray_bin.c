@@ -9,11 +9,11 @@
  *   2. rays: each one's grid cell, and where in their cells the rays lie;
  *   3. off a lattice, cells, an item a range of them: each cell's bounds of its rays'
  *      projections;
- *   4. triangles, four at a time: each one's projection, widened, the cells its box may reach
+ *   4. triangles, eight at a time: each one's projection, widened, the cells its box may reach
  *      by where the rays lie in theirs (none for a triangle between a lattice's points), and a
  *      count in every cell whose rays' bounds its box and edges may hold; on a lattice, where
  *      every cell's rays lie in one small box about its centre, that box against the edges in
- *      the grid's units, four triangles together (raster_spans4). Each item its own counters,
+ *      the grid's units, eight triangles together (raster_spans8). Each item its own counters,
  *      and its own range of triangles, taken a chunk at a time (tri_segment_first);
  *   - the counts become each item's write positions (a scan, each item a range of cells);
  * and ray_bin_fill:
@@ -28,6 +28,7 @@
 
 #include "cpu_trace.h"
 #include "float4.h"
+#include "float8.h"
 #include "ray4.h"
 #include "ray_cull.h"
 #include "work_pool.h"
@@ -421,20 +422,23 @@ static void cells_place_item(void *job, uint32_t item)
     }
 }
 
-/* Four projected triangles as the cells test them, a lane each: the widened box, the cells it
+/* Eight projected triangles as the cells test them, a lane each: the widened box, the cells it
  * spans and, where a triangle is wide enough for its orientation to be sure, its three edges
  * moved outwards by the widening and the rounding of these tests (inward normals n and offsets
  * c: a point p may lie in the triangle only where n . p >= c for all three; elsewhere n = 0 and
  * c = -infinity, which every cell passes). A detailed mesh's triangle covers about half its
  * box: the edges took 2.5 times fewer entries than boxes alone on the dragons. */
-typedef struct projected4 {
-    float box[4][4];        /* a min, a max, b min, b max */
-    int32_t span[4][4];     /* the box's first and last column, first and last row */
-    float across[2][4];     /* the span's columns and rows (not over 0 where it holds no cell) */
-    float nx[3][4], ny[3][4], c[3][4];
-} projected4;
+typedef struct projected8 {
+    float box[4][8];        /* a min, a max, b min, b max */
+    int32_t span[4][8];     /* the box's first and last column, first and last row */
+    float across[2][8];     /* the span's columns and rows (not over 0 where it holds no cell) */
+    float nx[3][8], ny[3][8], c[3][8];
+} projected8;
 
-/* The first and last cell columns (or rows) whose rays boxes from x to y (projected, four at a
+/* grid_coord4 eight lanes at a time: the same bits lane for lane. */
+static float8 grid_coord8(float8 x, float x0, float scale) { return f8_mul(f8_sub(x, f8_set1(x0)), f8_set1(scale)); }
+
+/* The first and last cell columns (or rows) whose rays boxes from x to y (projected, eight at a
  * time) may reach, clamped to the grid: cell k's rays lie at k + offset_min .. k + offset_max
  * in the grid's units (grid_coord4's c), so k from c(x) - offset_max up to
  * c(y) - offset_min, with room for the rounding of these differences (eight ulps of them, and
@@ -442,133 +446,148 @@ typedef struct projected4 {
  * corner all but on the origin's plane, which the plan turns away): MAXPS gives its second
  * operand for it. The first also as a float (first_f), and the cells from first to last
  * (across). */
-static void spans_of4(float4 x, float4 y, float x0, float scale, uint32_t cells, float offset_min,
-                      float offset_max, int32_t first[4], int32_t last[4], float4 *first_f, float across[4])
+static void spans_of8(float8 x, float8 y, float x0, float scale, uint32_t cells, float offset_min,
+                      float offset_max, int32_t first[8], int32_t last[8], float8 *first_f, float across[8])
 {
-    const float4 zero = f4_set1(0.0f), top = f4_set1((float)(cells - 1)), one = f4_set1(1.0f);
-    const float4 dx = f4_sub(grid_coord4(x, x0, scale), f4_set1(offset_max));
-    const float4 dy = f4_sub(grid_coord4(y, x0, scale), f4_set1(offset_min));
-    const float4 slack_x = f4_add(f4_set1(0x1p-8f), f4_mul(f4_abs(dx), f4_set1(0x1p-20f)));
-    const float4 slack_y = f4_add(f4_set1(0x1p-8f), f4_mul(f4_abs(dy), f4_set1(0x1p-20f)));
-    const float4 v = f4_sub(dx, slack_x), w = f4_add(dy, slack_y);
-    const float4 vc = f4_min(f4_max(v, zero), top), wc = f4_min(f4_max(w, zero), top);
-    const float4 down = f4_trunc(vc); /* vc >= 0: its floor */
-    *first_f = f4_add(down, f4_and(f4_lt(down, vc), one));
-    const float4 last_f = f4_select(f4_lt(w, zero), f4_set1(-1.0f), f4_trunc(wc));
-    f4_truncate(*first_f, first);
-    f4_truncate(last_f, last);
-    f4_store(across, f4_add(f4_sub(last_f, *first_f), one));
+    const float8 zero = f8_set1(0.0f), top = f8_set1((float)(cells - 1)), one = f8_set1(1.0f);
+    const float8 dx = f8_sub(grid_coord8(x, x0, scale), f8_set1(offset_max));
+    const float8 dy = f8_sub(grid_coord8(y, x0, scale), f8_set1(offset_min));
+    const float8 slack_x = f8_add(f8_set1(0x1p-8f), f8_mul(f8_abs(dx), f8_set1(0x1p-20f)));
+    const float8 slack_y = f8_add(f8_set1(0x1p-8f), f8_mul(f8_abs(dy), f8_set1(0x1p-20f)));
+    const float8 v = f8_sub(dx, slack_x), w = f8_add(dy, slack_y);
+    const float8 vc = f8_min(f8_max(v, zero), top), wc = f8_min(f8_max(w, zero), top);
+    const float8 down = f8_trunc(vc); /* vc >= 0: its floor */
+    *first_f = f8_add(down, f8_and(f8_lt(down, vc), one));
+    const float8 last_f = f8_select(f8_lt(w, zero), f8_set1(-1.0f), f8_trunc(wc));
+    f8_truncate(*first_f, first);
+    f8_truncate(last_f, last);
+    f8_store(across, f8_add(f8_sub(last_f, *first_f), one));
 }
 
-/* The edges of four triangles of corners (px, py) (a lane each), into out's nx, ny and c: inward
+/* The edges of eight triangles of corners (px, py) (a lane each), into out's nx, ny and c: inward
  * normals n and offsets c such that a point p may lie in the triangle only where n . p >= c for
  * all three. A corner may be off by tol (per axis); the edges move outwards by that and by
  * `grow` more (per axis: a box of rays of half widths grow about p may reach the triangle). Where
  * a triangle is too thin for its orientation to be sure, n = 0 and c = -infinity, which every
  * point passes. */
-static void edges4(const float4 px[3], const float4 py[3], float4 tol_x, float4 tol_y, float4 grow_x, float4 grow_y,
-                   projected4 *out)
+static void edges8(const float8 px[3], const float8 py[3], float8 tol_x, float8 tol_y, float8 grow_x, float8 grow_y,
+                   projected8 *out)
 {
-    float4 ex[3], ey[3], perimeter = f4_set1(0.0f);
+    float8 ex[3], ey[3], perimeter = f8_set1(0.0f);
     for (int k = 0; k < 3; k++) {
-        ex[k] = f4_sub(px[(k + 1) % 3], px[k]);
-        ey[k] = f4_sub(py[(k + 1) % 3], py[k]);
-        perimeter = f4_add(perimeter, f4_add(f4_abs(ex[k]), f4_abs(ey[k])));
+        ex[k] = f8_sub(px[(k + 1) % 3], px[k]);
+        ey[k] = f8_sub(py[(k + 1) % 3], py[k]);
+        perimeter = f8_add(perimeter, f8_add(f8_abs(ex[k]), f8_abs(ey[k])));
     }
     /* (P1 - P0) x (P2 - P0), twice the signed area; every height over four tolerances, so that
      * no rounding of the corners can turn the triangle over. */
-    const float4 area2 = f4_sub(f4_mul(ey[0], ex[2]), f4_mul(ex[0], ey[2]));
-    const float4 edges = f4_gt(f4_abs(area2), f4_mul(f4_mul(f4_set1(4.0f), f4_max(tol_x, tol_y)), perimeter));
-    const float4 side = f4_select(f4_gt(area2, f4_set1(0.0f)), f4_set1(1.0f), f4_set1(-1.0f));
-    const float4 out_x = f4_add(tol_x, grow_x), out_y = f4_add(tol_y, grow_y);
+    const float8 area2 = f8_sub(f8_mul(ey[0], ex[2]), f8_mul(ex[0], ey[2]));
+    const float8 edges = f8_gt(f8_abs(area2), f8_mul(f8_mul(f8_set1(4.0f), f8_max(tol_x, tol_y)), perimeter));
+    const float8 side = f8_select(f8_gt(area2, f8_set1(0.0f)), f8_set1(1.0f), f8_set1(-1.0f));
+    const float8 out_x = f8_add(tol_x, grow_x), out_y = f8_add(tol_y, grow_y);
     for (int k = 0; k < 3; k++) {
-        const float4 nx = f4_mul(f4_sub(f4_set1(0.0f), ey[k]), side), ny = f4_mul(ex[k], side);
-        const float4 c = f4_sub(f4_add(f4_mul(nx, px[k]), f4_mul(ny, py[k])),
-                                f4_add(f4_mul(out_x, f4_abs(nx)), f4_mul(out_y, f4_abs(ny))));
-        f4_store(out->nx[k], f4_and(edges, nx));
-        f4_store(out->ny[k], f4_and(edges, ny));
-        f4_store(out->c[k], f4_select(edges, c, f4_set1(-INFINITY)));
+        const float8 nx = f8_mul(f8_sub(f8_set1(0.0f), ey[k]), side), ny = f8_mul(ex[k], side);
+        const float8 c = f8_sub(f8_add(f8_mul(nx, px[k]), f8_mul(ny, py[k])),
+                                f8_add(f8_mul(out_x, f8_abs(nx)), f8_mul(out_y, f8_abs(ny))));
+        f8_store(out->nx[k], f8_and(edges, nx));
+        f8_store(out->ny[k], f8_and(edges, ny));
+        f8_store(out->c[k], f8_select(edges, c, f8_set1(-INFINITY)));
     }
 }
 
-/* Triangles t .. t + 3 (a lane past `end` repeats triangle t) projected, widened (WIDEN_ULPS)
- * and given their edges, in float. Four at a time through float4: a triangle's three corners
- * are rows of vkrt_gpu_tri, four of which transpose into x, y and z. Float rounding of the
- * projection is a few ulps of the same terms the widening's 64 are. The edges are in the
+/* Each component of a frame's float4 (the same in all four lanes) in all eight. */
+static float8 wide8(float4 x) { return f8_join(x, x); }
+
+/* Triangles t .. t + 7 (a lane past `end` repeats triangle t) projected, widened (WIDEN_ULPS)
+ * and given their edges, in float. Eight at a time through float8 (one AVX register in the
+ * x86-64-v3 build: half the instructions of four at a time, the same bits): a triangle's three
+ * corners are rows of vkrt_gpu_tri, four of which transpose into x, y and z. Float rounding of
+ * the projection is a few ulps of the same terms the widening's 64 are. The edges are in the
  * projection's units, or on a lattice (raster) in the grid's from the span's first cell's rays'
  * centre. Returns the mask of lanes with a corner on or behind the origin's plane. */
-static unsigned project_triangles(const ray_bin_job *j, uint32_t t, uint32_t end, projected4 *out)
+static unsigned project_triangles(const ray_bin_job *j, uint32_t t, uint32_t end, projected8 *out)
 {
     const frame *fr = &j->fr;
     const float inf = INFINITY;
-    float4 lo_a = f4_set1(inf), hi_a = f4_set1(-inf), lo_b = f4_set1(inf), hi_b = f4_set1(-inf);
-    float4 far = f4_set1(0.0f), min_z = f4_set1(inf), max_tan2 = f4_set1(0.0f), front = f4_eq(far, far);
-    const vkrt_gpu_tri *tri[4];
-    for (uint32_t k = 0; k < 4; k++) tri[k] = &j->tris[t + k < end ? t + k : t];
-    float4 pa[3], pb[3];
+    float8 lo_a = f8_set1(inf), hi_a = f8_set1(-inf), lo_b = f8_set1(inf), hi_b = f8_set1(-inf);
+    float8 far = f8_set1(0.0f), min_z = f8_set1(inf), max_tan2 = f8_set1(0.0f), front = f8_eq(far, far);
+    const vkrt_gpu_tri *tri[8];
+    for (uint32_t k = 0; k < 8; k++) tri[k] = &j->tris[t + k < end ? t + k : t];
+    float8 o[3], f[3], r[3], u[3];
+    for (int k = 0; k < 3; k++) {
+        o[k] = wide8(fr->o4[k]);
+        f[k] = wide8(fr->f4[k]);
+        r[k] = wide8(fr->r4[k]);
+        u[k] = wide8(fr->u4[k]);
+    }
+    float8 pa[3], pb[3];
     for (int corner = 0; corner < 3; corner++) {
-        float4 rows[4];
-        for (int k = 0; k < 4; k++) {
+        float4 rows[2][4];
+        for (int k = 0; k < 8; k++) {
             const vkrt_float3 *v = corner == 0 ? &tri[k]->v0 : corner == 1 ? &tri[k]->v1 : &tri[k]->v2;
-            rows[k] = f4_load(&v->x); /* x, y, z and the word after them */
+            rows[k / 4][k % 4] = f4_load(&v->x); /* x, y, z and the word after them */
         }
-        f4_transpose(rows);
-        const float4 px = f4_sub(rows[0], fr->o4[0]), py = f4_sub(rows[1], fr->o4[1]), pz = f4_sub(rows[2], fr->o4[2]);
-        const float4 z = f4_add(f4_add(f4_mul(px, fr->f4[0]), f4_mul(py, fr->f4[1])), f4_mul(pz, fr->f4[2]));
-        front = f4_and(front, f4_gt(z, f4_set1(0.0f)));
-        const float4 inv_z = f4_div(f4_set1(1.0f), z);
-        const float4 a = f4_mul(f4_add(f4_add(f4_mul(px, fr->r4[0]), f4_mul(py, fr->r4[1])), f4_mul(pz, fr->r4[2])), inv_z);
-        const float4 b = f4_mul(f4_add(f4_add(f4_mul(px, fr->u4[0]), f4_mul(py, fr->u4[1])), f4_mul(pz, fr->u4[2])), inv_z);
+        f4_transpose(rows[0]);
+        f4_transpose(rows[1]);
+        const float8 px = f8_sub(f8_join(rows[0][0], rows[1][0]), o[0]);
+        const float8 py = f8_sub(f8_join(rows[0][1], rows[1][1]), o[1]);
+        const float8 pz = f8_sub(f8_join(rows[0][2], rows[1][2]), o[2]);
+        const float8 z = f8_add(f8_add(f8_mul(px, f[0]), f8_mul(py, f[1])), f8_mul(pz, f[2]));
+        front = f8_and(front, f8_gt(z, f8_set1(0.0f)));
+        const float8 inv_z = f8_div(f8_set1(1.0f), z);
+        const float8 a = f8_mul(f8_add(f8_add(f8_mul(px, r[0]), f8_mul(py, r[1])), f8_mul(pz, r[2])), inv_z);
+        const float8 b = f8_mul(f8_add(f8_add(f8_mul(px, u[0]), f8_mul(py, u[1])), f8_mul(pz, u[2])), inv_z);
         pa[corner] = a;
         pb[corner] = b;
-        lo_a = f4_min(lo_a, a);
-        hi_a = f4_max(hi_a, a);
-        lo_b = f4_min(lo_b, b);
-        hi_b = f4_max(hi_b, b);
-        far = f4_max(far, f4_max(f4_abs(px), f4_max(f4_abs(py), f4_abs(pz))));
-        min_z = f4_min(min_z, z);
-        max_tan2 = f4_max(max_tan2, f4_add(f4_mul(a, a), f4_mul(b, b)));
+        lo_a = f8_min(lo_a, a);
+        hi_a = f8_max(hi_a, a);
+        lo_b = f8_min(lo_b, b);
+        hi_b = f8_max(hi_b, b);
+        far = f8_max(far, f8_max(f8_abs(px), f8_max(f8_abs(py), f8_abs(pz))));
+        min_z = f8_min(min_z, z);
+        max_tan2 = f8_max(max_tan2, f8_add(f8_mul(a, a), f8_mul(b, b)));
     }
-    const float4 widen =
-        f4_mul(f4_mul(f4_set1((float)WIDEN_ULPS), f4_div(far, min_z)), f4_add(f4_set1(1.0f), max_tan2));
-    const float4 box[4] = { f4_sub(lo_a, widen), f4_add(hi_a, widen), f4_sub(lo_b, widen), f4_add(hi_b, widen) };
+    const float8 widen =
+        f8_mul(f8_mul(f8_set1((float)WIDEN_ULPS), f8_div(far, min_z)), f8_add(f8_set1(1.0f), max_tan2));
+    const float8 box[4] = { f8_sub(lo_a, widen), f8_add(hi_a, widen), f8_sub(lo_b, widen), f8_add(hi_b, widen) };
     const grid *g = &j->g;
-    for (int k = 0; k < 4; k++) f4_store(out->box[k], box[k]);
-    float4 first_x, first_y;
-    spans_of4(box[0], box[1], g->a0, g->sa, g->gx, j->offset_min[0], j->offset_max[0], out->span[0], out->span[1],
+    for (int k = 0; k < 4; k++) f8_store(out->box[k], box[k]);
+    float8 first_x, first_y;
+    spans_of8(box[0], box[1], g->a0, g->sa, g->gx, j->offset_min[0], j->offset_max[0], out->span[0], out->span[1],
               &first_x, out->across[0]);
-    spans_of4(box[2], box[3], g->b0, g->sb, g->gy, j->offset_min[1], j->offset_max[1], out->span[2], out->span[3],
+    spans_of8(box[2], box[3], g->b0, g->sb, g->gy, j->offset_min[1], j->offset_max[1], out->span[2], out->span[3],
               &first_y, out->across[1]);
-    const float4 zero = f4_set1(0.0f);
+    const float8 zero = f8_set1(0.0f);
     if (!j->raster) {
         /* Distances within `tolerance` of the triangle count as inside: the widening, and the
          * rounding of the edge terms (a few ulps of the coordinates' size), with room. */
-        float4 reach = f4_set1(1.0f);
-        for (int k = 0; k < 3; k++) reach = f4_max(reach, f4_max(f4_abs(pa[k]), f4_abs(pb[k])));
-        const float4 tolerance = f4_add(widen, f4_mul(f4_set1(0x1p-19f), reach));
-        edges4(pa, pb, tolerance, tolerance, zero, zero, out);
+        float8 reach = f8_set1(1.0f);
+        for (int k = 0; k < 3; k++) reach = f8_max(reach, f8_max(f8_abs(pa[k]), f8_abs(pb[k])));
+        const float8 tolerance = f8_add(widen, f8_mul(f8_set1(0x1p-19f), reach));
+        edges8(pa, pb, tolerance, tolerance, zero, zero, out);
     } else {
-        /* The corners in the grid's units (grid_coord4, as the rays' cells were found), from the
-         * centre of the rays' box in the span's first cell: the cells' rays then lie at whole
-         * steps (dx, dy) from it, within ray_half. A corner's widening scales by the grid's cells
-         * per unit. The grid coordinates of a corner and of a ray are off by their rounding,
-         * under 2^-23 of their size, which no point of the triangle passes the corners' (reach);
-         * the edge terms' rounding is some ulps of the corners' distance from the centre (near). */
-        float4 lx[3], ly[3], reach = f4_set1(1.0f), near = f4_set1(1.0f);
-        const float4 cx = f4_add(first_x, f4_set1(j->ray_centre[0])), cy = f4_add(first_y, f4_set1(j->ray_centre[1]));
+        /* The corners in the grid's units (grid_coord8, as grid_coord4 found the rays' cells),
+         * from the centre of the rays' box in the span's first cell: the cells' rays then lie at
+         * whole steps (dx, dy) from it, within ray_half. A corner's widening scales by the grid's
+         * cells per unit. The grid coordinates of a corner and of a ray are off by their
+         * rounding, under 2^-23 of their size, which no point of the triangle passes the
+         * corners' (reach); the edge terms' rounding is some ulps of the corners' distance from
+         * the centre (near). */
+        float8 lx[3], ly[3], reach = f8_set1(1.0f), near = f8_set1(1.0f);
+        const float8 cx = f8_add(first_x, f8_set1(j->ray_centre[0])), cy = f8_add(first_y, f8_set1(j->ray_centre[1]));
         for (int k = 0; k < 3; k++) {
-            const float4 gx = grid_coord4(pa[k], g->a0, g->sa), gy = grid_coord4(pb[k], g->b0, g->sb);
-            reach = f4_max(reach, f4_max(f4_abs(gx), f4_abs(gy)));
-            lx[k] = f4_sub(gx, cx);
-            ly[k] = f4_sub(gy, cy);
-            near = f4_max(near, f4_max(f4_abs(lx[k]), f4_abs(ly[k])));
+            const float8 gx = grid_coord8(pa[k], g->a0, g->sa), gy = grid_coord8(pb[k], g->b0, g->sb);
+            reach = f8_max(reach, f8_max(f8_abs(gx), f8_abs(gy)));
+            lx[k] = f8_sub(gx, cx);
+            ly[k] = f8_sub(gy, cy);
+            near = f8_max(near, f8_max(f8_abs(lx[k]), f8_abs(ly[k])));
         }
-        const float4 rounding = f4_add(f4_mul(f4_set1(0x1p-20f), reach), f4_mul(f4_set1(0x1p-18f), near));
-        const float4 tol_x = f4_add(f4_mul(widen, f4_set1(g->sa)), rounding);
-        const float4 tol_y = f4_add(f4_mul(widen, f4_set1(g->sb)), rounding);
-        edges4(lx, ly, tol_x, tol_y, f4_set1(j->ray_half[0]), f4_set1(j->ray_half[1]), out);
+        const float8 rounding = f8_add(f8_mul(f8_set1(0x1p-20f), reach), f8_mul(f8_set1(0x1p-18f), near));
+        const float8 tol_x = f8_add(f8_mul(widen, f8_set1(g->sa)), rounding);
+        const float8 tol_y = f8_add(f8_mul(widen, f8_set1(g->sb)), rounding);
+        edges8(lx, ly, tol_x, tol_y, f8_set1(j->ray_half[0]), f8_set1(j->ray_half[1]), out);
     }
-    return ~f4_bits(front) & 15u;
+    return ~f8_bits(front) & 0xFFu;
 }
 
 /* The count's items share the triangles out as they go, so that a thread held up (two cores
@@ -584,14 +603,14 @@ static uint32_t tri_segment_first(const ray_bin_job *j, uint32_t segment)
     return (uint32_t)((uint64_t)j->tri_count * (item < j->items ? item : j->items) / j->items);
 }
 
-/* One lane of a projected4, the triangle the cells test, in all four lanes; and its span. */
+/* One lane of a projected8, the triangle the cells test, in all four lanes; and its span. */
 typedef struct tri_test {
     float4 box[4];
     float4 nx[3], ny[3], c[3];
     uint32_t x0, x1, y0, y1;
 } tri_test;
 
-static void tri_test_of(const projected4 *p, uint32_t lane, tri_test *t)
+static void tri_test_of(const projected8 *p, uint32_t lane, tri_test *t)
 {
     for (int k = 0; k < 4; k++) t->box[k] = f4_set1(p->box[k][lane]);
     for (int k = 0; k < 3; k++) {
@@ -708,58 +727,78 @@ static bool count_triangle(ray_bin_job *j, uint32_t t, const tri_test *s, uint32
     return true;
 }
 
+/* The 8 x 8 bit matrix of bit 8 r + c at row r, column c, transposed (Hacker's Delight, 7-3). */
+static uint64_t transpose_bits8(uint64_t x)
+{
+    uint64_t t = (x ^ (x >> 7)) & 0x00AA00AA00AA00AAull;
+    x ^= t ^ (t << 7);
+    t = (x ^ (x >> 14)) & 0x0000CCCC0000CCCCull;
+    x ^= t ^ (t << 14);
+    t = (x ^ (x >> 28)) & 0x00000000F0F0F0F0ull;
+    return x ^ t ^ (t << 28);
+}
+
 /* On a lattice (raster), the cells of the spans of p's lanes (lane k's w[k] wide and n[k] cells,
  * at most 64; none where n[k] is 0) that pass their edges: as count_triangle's masks (bit
  * width dy + dx), into cells[].
- * The four triangles go together, a cell of each a step, so that a span's shape takes no branch:
- * most of a detailed mesh's are of one to four cells, in no order. */
-static void raster_spans4(const projected4 *p, float4 w, float4 n, uint64_t cells[4])
+ * The eight triangles go together, a cell of each a step, so that a span's shape takes no
+ * branch: most of a detailed mesh's are of one to four cells, in no order. */
+static void raster_spans8(const projected8 *p, float8 w, float8 n, uint64_t cells[8])
 {
     /* The most cells of a lane: n's largest, the least of -n. */
-    const uint32_t most = (uint32_t)-f4_min_lane(f4_sub(f4_set1(0.0f), n));
-    for (uint32_t k = 0; k < 4; k++) cells[k] = 0;
-    tri_test t;
+    const uint32_t most = (uint32_t)-f8_min_lane(f8_sub(f8_set1(0.0f), n));
+    for (uint32_t k = 0; k < 8; k++) cells[k] = 0;
+    float8 nx[3], ny[3], c[3];
     for (int k = 0; k < 3; k++) {
-        t.nx[k] = f4_load(p->nx[k]);
-        t.ny[k] = f4_load(p->ny[k]);
-        t.c[k] = f4_load(p->c[k]);
+        nx[k] = f8_load(p->nx[k]);
+        ny[k] = f8_load(p->ny[k]);
+        c[k] = f8_load(p->c[k]);
     }
-    const float4 one = f4_set1(1.0f);
-    float4 dx = f4_set1(0.0f), dy = dx, at = dx;
+    const float8 one = f8_set1(1.0f);
+    float8 dx = f8_set1(0.0f), dy = dx, at = dx;
+    uint64_t steps = 0;
     for (uint32_t i = 0; i < most; i++) {
-        const unsigned in = cells_raster4(&t, dx, dy) & f4_bits(f4_lt(at, n));
-        for (uint32_t k = 0; k < 4; k++) cells[k] |= (uint64_t)(in >> k & 1u) << i;
-        at = f4_add(at, one);
-        dx = f4_add(dx, one);
-        const float4 wrap = f4_ge(dx, w);
-        dx = f4_andnot(wrap, dx);
-        dy = f4_add(dy, f4_and(wrap, one));
+        /* cells_raster4's test, a lane a triangle. */
+        float8 in = f8_lt(at, n);
+        for (int k = 0; k < 3; k++) in = f8_and(in, f8_ge(f8_add(f8_mul(nx[k], dx), f8_mul(ny[k], dy)), c[k]));
+        /* A byte a step; each eight steps' bytes turned into a byte a lane. */
+        steps |= (uint64_t)f8_bits(in) << (i % 8 * 8);
+        if (i % 8 == 7 || i + 1 == most) {
+            const uint64_t lanes = transpose_bits8(steps);
+            for (uint32_t k = 0; k < 8; k++) cells[k] |= (lanes >> (k * 8) & 0xFFu) << (i / 8 * 8);
+            steps = 0;
+        }
+        at = f8_add(at, one);
+        dx = f8_add(dx, one);
+        const float8 wrap = f8_ge(dx, w);
+        dx = f8_andnot(wrap, dx);
+        dy = f8_add(dy, f8_and(wrap, one));
     }
 }
 
-/* On a lattice (raster): counts the four triangles of p (t4 .. t4 + lanes - 1) into `count`,
+/* On a lattice (raster): counts the eight triangles of p (t8 .. t8 + lanes - 1) into `count`,
  * as count_triangle does; false where *visited passes `budget`. Without a branch a triangle but
  * for the rare one over more than 64 cells (count_triangle's) and for its cells past the first. */
-static bool count_raster4(ray_bin_job *j, uint32_t t4, uint32_t lanes, const projected4 *p, uint32_t *count,
+static bool count_raster8(ray_bin_job *j, uint32_t t8, uint32_t lanes, const projected8 *p, uint32_t *count,
                           uint64_t *visited, uint64_t budget)
 {
     const uint32_t stride = j->g.stride;
     /* The spans' shapes in float (exact: a grid's side is at most 2^22 cells), without a branch
      * or a store a lane: between the rays (no column or no row) no cell, so width 1 and none. */
-    const float4 one = f4_set1(1.0f), zero = f4_set1(0.0f);
-    const float4 across = f4_load(p->across[0]), down = f4_load(p->across[1]);
-    const float4 has = f4_and(f4_mask((1u << lanes) - 1), f4_and(f4_gt(across, zero), f4_gt(down, zero)));
-    const float4 n = f4_mul(across, down);
-    const float4 small_mask = f4_and(has, f4_le(n, f4_set1(64.0f)));
-    const unsigned small = f4_bits(small_mask), big = f4_bits(has) & ~small;
-    const float4 w = f4_select(has, across, one), n_small = f4_and(small_mask, n);
-    int32_t widths[4], spans[4];
-    f4_truncate(w, widths);
-    f4_truncate(n_small, spans);
-    uint64_t cells[4];
-    raster_spans4(p, w, n_small, cells);
+    const float8 one = f8_set1(1.0f), zero = f8_set1(0.0f);
+    const float8 across = f8_load(p->across[0]), down = f8_load(p->across[1]);
+    const float8 has = f8_and(f8_mask((1u << lanes) - 1), f8_and(f8_gt(across, zero), f8_gt(down, zero)));
+    const float8 n = f8_mul(across, down);
+    const float8 small_mask = f8_and(has, f8_le(n, f8_set1(64.0f)));
+    const unsigned small = f8_bits(small_mask), big = f8_bits(has) & ~small;
+    const float8 w = f8_select(has, across, one), n_small = f8_and(small_mask, n);
+    int32_t widths[8], spans[8];
+    f8_truncate(w, widths);
+    f8_truncate(n_small, spans);
+    uint64_t cells[8];
+    raster_spans8(p, w, n_small, cells);
     for (uint32_t k = 0; k < lanes; k++) {
-        const uint32_t t = t4 + k;
+        const uint32_t t = t8 + k;
         if (big >> k & 1u) {
             tri_test s;
             tri_test_of(p, k, &s);
@@ -789,15 +828,15 @@ static bool count_range(ray_bin_job *j, uint32_t item, uint32_t first, uint32_t 
     const uint64_t before = atomic_load_explicit(&j->visited, memory_order_relaxed);
     const uint64_t budget = j->cell_budget > before ? j->cell_budget - before : 0;
     uint64_t visited = 0;
-    for (uint32_t t4 = first; t4 < end; t4 += 4) {
-        projected4 p;
-        const uint32_t lanes = end - t4 < 4 ? end - t4 : 4;
-        if (project_triangles(j, t4, end, &p) & ((1u << lanes) - 1)) {
+    for (uint32_t t8 = first; t8 < end; t8 += 8) {
+        projected8 p;
+        const uint32_t lanes = end - t8 < 8 ? end - t8 : 8;
+        if (project_triangles(j, t8, end, &p) & ((1u << lanes) - 1)) {
             j->item_behind[item] = true;
             return false;
         }
         if (j->raster) {
-            if (!count_raster4(j, t4, lanes, &p, count, &visited, budget)) {
+            if (!count_raster8(j, t8, lanes, &p, count, &visited, budget)) {
                 j->item_over[item] = true;
                 return false;
             }
@@ -806,14 +845,14 @@ static bool count_range(ray_bin_job *j, uint32_t item, uint32_t first, uint32_t 
         for (uint32_t lane = 0; lane < lanes; lane++) {
             if (p.span[1][lane] < p.span[0][lane] || p.span[3][lane] < p.span[2][lane]) {
                 /* Between the rays: no cell. */
-                j->tri_cell[t4 + lane] = 0;
-                j->tri_cells[t4 + lane] = 0;
-                j->tri_width[t4 + lane] = 1;
+                j->tri_cell[t8 + lane] = 0;
+                j->tri_cells[t8 + lane] = 0;
+                j->tri_width[t8 + lane] = 1;
                 continue;
             }
             tri_test s;
             tri_test_of(&p, lane, &s);
-            if (!count_triangle(j, t4 + lane, &s, count, &visited, budget)) {
+            if (!count_triangle(j, t8 + lane, &s, count, &visited, budget)) {
                 j->item_over[item] = true;
                 return false;
             }
@@ -866,8 +905,8 @@ static void tris_fill_item(void *job, uint32_t item)
             }
             continue;
         }
-        /* Projected again: lane 0 of four copies of t, the same bits as its lane in the count. */
-        projected4 p;
+        /* Projected again: lane 0 of eight copies of t, the same bits as its lane in the count. */
+        projected8 p;
         project_triangles(j, t, t + 1, &p);
         tri_test s;
         tri_test_of(&p, 0, &s);

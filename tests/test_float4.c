@@ -15,7 +15,7 @@
 #include "float8.h"
 
 static const float values[] = { 0.0f, -0.0f, 1.0f, -1.0f, 0.5f, -3.25f, 1e-40f, -1e-40f, FLT_MIN, FLT_MAX, -FLT_MAX,
-                                INFINITY, -INFINITY, NAN, 7e-8f, 3e38f };
+                                INFINITY, -INFINITY, NAN, 7e-8f, 3e38f, 1.75f };
 enum { VALUES = sizeof values / sizeof values[0] };
 
 static uint32_t bits_of(float x)
@@ -187,6 +187,18 @@ static void eight_lane_masks_selects_and_lane_operations_are_their_expressions(v
             for (int l = 0; l < 8; l++) CHECK(same(r[l], x[(l + 4) % 8]));
             f8_store(r, f8_set1(values[i]));
             for (int l = 0; l < 8; l++) CHECK(same(r[l], values[i]));
+            f8_store(r, f8_load(x));
+            for (int l = 0; l < 8; l++) CHECK(same(r[l], x[l]));
+            /* f8_trunc and f8_truncate within their domain (|x| < 2^31): toward zero, as a float
+             * and as an int32. */
+            int32_t whole[8];
+            f8_store(r, f8_trunc(a));
+            f8_truncate(a, whole);
+            for (int l = 0; l < 8; l++)
+                if (fabsf(x[l]) < 0x1p31f) {
+                    CHECK_MSG(same(r[l], (float)(int32_t)x[l]), "f8_trunc(%a)", x[l]);
+                    CHECK_MSG(whole[l] == (int32_t)x[l], "f8_truncate(%a)", x[l]);
+                }
         }
 }
 
