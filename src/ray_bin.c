@@ -71,6 +71,7 @@ typedef struct ray_item_result {
                         min, a max, b min, b max of c - x of rays_cell4's c and column x, and of
                         b's c and row) */
     bool origin_differs, wide_angle;
+    bool tmin_positive; /* a ray that gets a cell starts past its origin (tmin > 0): no culling */
 } ray_item_result;
 
 /* The plan's larger arrays, each with the bytes it holds, kept between calls where the caller
@@ -86,6 +87,8 @@ enum {
     ARRAY_TRI_CELL,
     ARRAY_TRI_CELLS,
     ARRAY_TRI_WIDTH,
+    ARRAY_DEPTHS,
+    ARRAY_TRI_NEAR,
     ARRAYS
 };
 
@@ -124,6 +127,15 @@ struct ray_bin_job {
      * in the grid's units (cells_raster4): no cell's bounds are read, nor found. */
     bool raster;
     float ray_centre[2], ray_half[2];
+    /* On a lattice, where every ray starts at the origin (tmin 0): the lists leave out a triangle
+     * wherever it lies wholly behind a triangle that every ray of the cell surely hits, which
+     * then takes every such ray's closest hit before it (occlusion culling). Depths are
+     * distances along the axis, kept as depth_key()s. */
+    bool cull;
+    uint32_t *depths;          /* per triangle item, a cell each: the nearest depth a ray of the
+                                  cell surely hits a triangle by (0: none found); item 0's the
+                                  items' together once the scan has run */
+    uint32_t *tri_near;        /* the depth no point of the triangle is nearer than */
     ray_item_result *ray_results;
     float *ray_ab;             /* 2 a ray; NaN for a ray that gets no cell */
     uint32_t *ray_cell;
@@ -265,6 +277,7 @@ static void rays_project_item(void *job, uint32_t item)
         res.origin_differs |= (enters & ~same) != 0;
         res.wide_angle |= (enters & ~near_axis) != 0;
         const unsigned keep = enters & near_axis;
+        for (uint32_t k = 0; k < lanes; k++) res.tmin_positive |= (keep >> k & 1u) && r[k].tmin > 0.0f;
         const float4 kept = f4_mask(keep);
         const float4 nan = f4_set1(NAN);
         float av[4], bv[4];
@@ -409,9 +422,13 @@ static void cells_sum_item(void *job, uint32_t item)
 }
 
 /* The scan's second half, once the totals passed the limits: each cell's first entry, and each
- * triangle item's first position in it. Most cells of a view hold no entry (three in four of
- * the standard view's): a block of four without one writes its first entries alone, its counts
- * left at 0 (the fill reads no position of a cell without entries). */
+ * triangle item's write position in it. The items of a pair (tri_segment_first) write from the
+ * end of the first one's part, the first backwards over its triangles from the last, the second
+ * forwards: whatever each leaves out (occlusion culling), the pair's entries lie together, in
+ * the triangles' order. Most cells of a view hold no entry (three in four of the standard
+ * view's): a block of four without one writes its first entries alone, its positions left at 0
+ * (the fill reads no position of a cell without entries). Culling, the items' depths go into
+ * item 0's. */
 static void cells_place_item(void *job, uint32_t item)
 {
     ray_bin_job *j = job;
@@ -427,12 +444,18 @@ static void cells_place_item(void *job, uint32_t item)
         }
         for (uint32_t k = 0; k < 4; k++) {
             j->cell_start[c + k] = at;
-            for (uint32_t i = 0; i < j->items; i++) {
+            for (uint32_t i = 0; i < j->items; i += 2) {
                 uint32_t *count = &j->counts[(size_t)i * cells + c + k];
-                const uint32_t n = *count;
-                *count = at;
-                at += n;
+                const uint32_t n = count[0], m = i + 1 < j->items ? count[cells] : 0;
+                count[0] = at + n;
+                if (i + 1 < j->items) count[cells] = at + n;
+                at += n + m;
             }
+            if (j->cull)
+                for (uint32_t i = 1; i < j->items; i++) {
+                    const uint32_t d = j->depths[(size_t)i * cells + c + k];
+                    if (d > j->depths[c + k]) j->depths[c + k] = d;
+                }
         }
     }
 }
@@ -448,6 +471,10 @@ typedef struct projected8 {
     int32_t span[4][8];     /* the box's first and last column, first and last row */
     float across[2][8];     /* the span's columns and rows (not over 0 where it holds no cell) */
     float nx[3][8], ny[3][8], c[3][8];
+    /* The edges moved inwards as c is outwards: a point p with n . p >= c_in for all three lies
+     * in the triangle with every ray of its cell (+infinity where the edges are not sure). */
+    float c_in[3][8];
+    float depth_near[8], depth_far[8]; /* depths along the axis no point of it passes, with room */
 } projected8;
 
 /* grid_coord4 eight lanes at a time: the same bits lane for lane. */
@@ -507,6 +534,9 @@ static void edges8(const float8 px[3], const float8 py[3], float8 tol_x, float8 
         f8_store(out->nx[k], f8_and(edges, nx));
         f8_store(out->ny[k], f8_and(edges, ny));
         f8_store(out->c[k], f8_select(edges, c, f8_set1(-INFINITY)));
+        const float8 c_in = f8_add(f8_add(f8_mul(nx, px[k]), f8_mul(ny, py[k])),
+                                   f8_add(f8_mul(out_x, f8_abs(nx)), f8_mul(out_y, f8_abs(ny))));
+        f8_store(out->c_in[k], f8_select(edges, c_in, f8_set1(INFINITY)));
     }
 }
 
@@ -525,7 +555,8 @@ static unsigned project_triangles(const ray_bin_job *j, uint32_t t, uint32_t end
     const frame *fr = &j->fr;
     const float inf = INFINITY;
     float8 lo_a = f8_set1(inf), hi_a = f8_set1(-inf), lo_b = f8_set1(inf), hi_b = f8_set1(-inf);
-    float8 far = f8_set1(0.0f), min_z = f8_set1(inf), max_tan2 = f8_set1(0.0f), front = f8_eq(far, far);
+    float8 far = f8_set1(0.0f), min_z = f8_set1(inf), max_z = f8_set1(0.0f), max_tan2 = f8_set1(0.0f);
+    float8 front = f8_eq(far, far);
     const vkrt_gpu_tri *tri[8];
     for (uint32_t k = 0; k < 8; k++) tri[k] = &j->tris[t + k < end ? t + k : t];
     float8 o[3], f[3], r[3], u[3];
@@ -560,6 +591,7 @@ static unsigned project_triangles(const ray_bin_job *j, uint32_t t, uint32_t end
         hi_b = f8_max(hi_b, b);
         far = f8_max(far, f8_max(f8_abs(px), f8_max(f8_abs(py), f8_abs(pz))));
         min_z = f8_min(min_z, z);
+        max_z = f8_max(max_z, z);
         max_tan2 = f8_max(max_tan2, f8_add(f8_mul(a, a), f8_mul(b, b)));
     }
     const float8 widen =
@@ -567,6 +599,12 @@ static unsigned project_triangles(const ray_bin_job *j, uint32_t t, uint32_t end
     const float8 box[4] = { f8_sub(lo_a, widen), f8_add(hi_a, widen), f8_sub(lo_b, widen), f8_add(hi_b, widen) };
     const grid *g = &j->g;
     for (int k = 0; k < 4; k++) f8_store(out->box[k], box[k]);
+    /* A corner's depth in float is off by a few ulps of its coordinates (far); the room, 2^-14
+     * of far, also keeps a culled triangle's hits beyond any rounding of the closer one's
+     * distance. */
+    const float8 room = f8_mul(far, f8_set1(0x1p-14f));
+    f8_store(out->depth_near, f8_max(f8_sub(min_z, room), f8_set1(0.0f)));
+    f8_store(out->depth_far, f8_add(max_z, room));
     float8 first_x, first_y;
     spans_of8(box[0], box[1], g->a0, g->sa, g->gx, j->offset_min[0], j->offset_max[0], out->span[0], out->span[1],
               &first_x, out->across[0]);
@@ -753,35 +791,54 @@ static uint64_t transpose_bits8(uint64_t x)
     return x ^ t ^ (t << 28);
 }
 
+/* A depth (>= 0) as a key whose unsigned order is the reverse of the depths': the nearest is the
+ * greatest, and 0, which no depth gives, stands for none. */
+static uint32_t depth_key(float depth)
+{
+    uint32_t bits;
+    memcpy(&bits, &depth, sizeof bits);
+    return UINT32_MAX - bits;
+}
+
 /* On a lattice (raster), the cells of the spans of p's lanes (lane k's w[k] wide and n[k] cells,
  * at most 64; none where n[k] is 0) that pass their edges: as count_triangle's masks (bit
  * width dy + dx), into cells[].
  * The eight triangles go together, a cell of each a step, so that a span's shape takes no
  * branch: most of a detailed mesh's are of one to four cells, in no order. */
-static void raster_spans8(const projected8 *p, float8 w, float8 n, uint64_t cells[8])
+static void raster_spans8(const projected8 *p, float8 w, float8 n, uint64_t cells[8], uint64_t inner[8])
 {
     /* The most cells of a lane: n's largest, the least of -n. */
     const uint32_t most = (uint32_t)-f8_min_lane(f8_sub(f8_set1(0.0f), n));
-    for (uint32_t k = 0; k < 8; k++) cells[k] = 0;
-    float8 nx[3], ny[3], c[3];
+    for (uint32_t k = 0; k < 8; k++) cells[k] = inner[k] = 0;
+    float8 nx[3], ny[3], c[3], c_in[3];
     for (int k = 0; k < 3; k++) {
         nx[k] = f8_load(p->nx[k]);
         ny[k] = f8_load(p->ny[k]);
         c[k] = f8_load(p->c[k]);
+        c_in[k] = f8_load(p->c_in[k]);
     }
     const float8 one = f8_set1(1.0f);
     float8 dx = f8_set1(0.0f), dy = dx, at = dx;
-    uint64_t steps = 0;
+    uint64_t steps = 0, steps_in = 0;
     for (uint32_t i = 0; i < most; i++) {
-        /* cells_raster4's test, a lane a triangle. */
-        float8 in = f8_lt(at, n);
-        for (int k = 0; k < 3; k++) in = f8_and(in, f8_ge(f8_add(f8_mul(nx[k], dx), f8_mul(ny[k], dy)), c[k]));
+        /* cells_raster4's test, a lane a triangle; and whether the cell's rays surely hit it. */
+        const float8 span = f8_lt(at, n);
+        float8 in = span, sure = span;
+        for (int k = 0; k < 3; k++) {
+            const float8 e = f8_add(f8_mul(nx[k], dx), f8_mul(ny[k], dy));
+            in = f8_and(in, f8_ge(e, c[k]));
+            sure = f8_and(sure, f8_ge(e, c_in[k]));
+        }
         /* A byte a step; each eight steps' bytes turned into a byte a lane. */
         steps |= (uint64_t)f8_bits(in) << (i % 8 * 8);
+        steps_in |= (uint64_t)f8_bits(sure) << (i % 8 * 8);
         if (i % 8 == 7 || i + 1 == most) {
-            const uint64_t lanes = transpose_bits8(steps);
-            for (uint32_t k = 0; k < 8; k++) cells[k] |= (lanes >> (k * 8) & 0xFFu) << (i / 8 * 8);
-            steps = 0;
+            const uint64_t lanes = transpose_bits8(steps), lanes_in = transpose_bits8(steps_in);
+            for (uint32_t k = 0; k < 8; k++) {
+                cells[k] |= (lanes >> (k * 8) & 0xFFu) << (i / 8 * 8);
+                inner[k] |= (lanes_in >> (k * 8) & 0xFFu) << (i / 8 * 8);
+            }
+            steps = steps_in = 0;
         }
         at = f8_add(at, one);
         dx = f8_add(dx, one);
@@ -795,7 +852,7 @@ static void raster_spans8(const projected8 *p, float8 w, float8 n, uint64_t cell
  * as count_triangle does; false where *visited passes `budget`. Without a branch a triangle but
  * for the rare one over more than 64 cells (count_triangle's) and for its cells past the first. */
 static bool count_raster8(ray_bin_job *j, uint32_t t8, uint32_t lanes, const projected8 *p, uint32_t *count,
-                          uint64_t *visited, uint64_t budget)
+                          uint32_t *depths, uint64_t *visited, uint64_t budget)
 {
     const uint32_t stride = j->g.stride;
     /* The spans' shapes in float (exact: a grid's side is at most 2^22 cells), without a branch
@@ -810,10 +867,11 @@ static bool count_raster8(ray_bin_job *j, uint32_t t8, uint32_t lanes, const pro
     int32_t widths[8], spans[8];
     f8_truncate(w, widths);
     f8_truncate(n_small, spans);
-    uint64_t cells[8];
-    raster_spans8(p, w, n_small, cells);
+    uint64_t cells[8], inner[8];
+    raster_spans8(p, w, n_small, cells, inner);
     for (uint32_t k = 0; k < lanes; k++) {
         const uint32_t t = t8 + k;
+        if (j->cull) j->tri_near[t] = depth_key(p->depth_near[k]);
         if (big >> k & 1u) {
             tri_test s;
             tri_test_of(p, k, &s);
@@ -828,6 +886,14 @@ static bool count_raster8(ray_bin_job *j, uint32_t t8, uint32_t lanes, const pro
         count[left ? at : cell0] += left != 0;
         for (left &= left - 1; left; left &= left - 1)
             count[cell0 + span_cell((uint32_t)__builtin_ctzll(left), width, stride)]++;
+        if (j->cull && inner[k]) {
+            /* The cells whose rays surely hit it: none finds its closest hit farther away. */
+            const uint32_t key = depth_key(p->depth_far[k]);
+            for (uint64_t sure = inner[k]; sure; sure &= sure - 1) {
+                uint32_t *d = &depths[cell0 + span_cell((uint32_t)__builtin_ctzll(sure), width, stride)];
+                *d = key > *d ? key : *d;
+            }
+        }
         j->tri_cell[t] = cell0;
         j->tri_cells[t] = cells[k];
         j->tri_width[t] = (uint8_t)width;
@@ -838,7 +904,7 @@ static bool count_raster8(ray_bin_job *j, uint32_t t8, uint32_t lanes, const pro
 
 /* Counts triangles first .. end - 1 into `count`; false, with the item's flag set, where the
  * lists cannot be built. */
-static bool count_range(ray_bin_job *j, uint32_t item, uint32_t first, uint32_t end, uint32_t *count)
+static bool count_range(ray_bin_job *j, uint32_t item, uint32_t first, uint32_t end, uint32_t *count, uint32_t *depths)
 {
     const uint64_t before = atomic_load_explicit(&j->visited, memory_order_relaxed);
     const uint64_t budget = j->cell_budget > before ? j->cell_budget - before : 0;
@@ -851,7 +917,7 @@ static bool count_range(ray_bin_job *j, uint32_t item, uint32_t first, uint32_t 
             return false;
         }
         if (j->raster) {
-            if (!count_raster8(j, t8, lanes, &p, count, &visited, budget)) {
+            if (!count_raster8(j, t8, lanes, &p, count, depths, &visited, budget)) {
                 j->item_over[item] = true;
                 return false;
             }
@@ -885,6 +951,8 @@ static void tris_count_item(void *job, uint32_t item)
     ray_bin_job *j = job;
     uint32_t *count = j->counts + (size_t)item * j->g.cells;
     memset(count, 0, (size_t)j->g.cells * sizeof *count);
+    uint32_t *depths = j->cull ? j->depths + (size_t)item * j->g.cells : NULL;
+    if (depths) memset(depths, 0, (size_t)j->g.cells * sizeof *depths);
     const uint32_t segment = item / 2, start = tri_segment_first(j, segment), end = tri_segment_first(j, segment + 1);
     const uint32_t chunks = core_div_up(end - start, j->tri_chunk);
     const bool backwards = item % 2;
@@ -896,7 +964,7 @@ static void tris_count_item(void *job, uint32_t item)
         taken++;
         const uint32_t first = start + chunk * j->tri_chunk;
         const uint32_t last = end - first > j->tri_chunk ? first + j->tri_chunk : end;
-        if (!count_range(j, item, first, last, count)) {
+        if (!count_range(j, item, first, last, count, depths)) {
             atomic_store_explicit(&j->stop, true, memory_order_relaxed);
             break;
         }
@@ -911,12 +979,22 @@ static void tris_fill_item(void *job, uint32_t item)
     ray_bin_job *j = job;
     const grid *g = &j->g;
     uint32_t *at = j->counts + (size_t)item * g->cells;
-    for (uint32_t t = j->tri_first[item], end = j->tri_end[item]; t < end; t++) {
+    /* The first item of a pair backwards from its last triangle, the second forwards
+     * (cells_place_item). */
+    const bool backwards = item % 2 == 0;
+    const uint32_t first = j->tri_first[item], end = j->tri_end[item];
+    const uint32_t *depths = j->depths;
+    for (uint32_t n = 0; n < end - first; n++) {
+        const uint32_t t = backwards ? end - 1 - n : first + n;
         const uint32_t width = j->tri_width[t];
+        /* Culling, a cell whose rays surely hit a triangle nearer than all of t lists no t. */
+        const uint32_t near = j->cull ? j->tri_near[t] : UINT32_MAX;
         if (width) {
             /* The cells the count noted, in its order. */
             for (uint64_t cells = j->tri_cells[t]; cells; cells &= cells - 1) {
-                j->entries[at[j->tri_cell[t] + span_cell((uint32_t)__builtin_ctzll(cells), width, g->stride)]++] = t;
+                const uint32_t cell = j->tri_cell[t] + span_cell((uint32_t)__builtin_ctzll(cells), width, g->stride);
+                if (j->cull && near < depths[cell]) continue;
+                j->entries[backwards ? --at[cell] : at[cell]++] = t;
             }
             continue;
         }
@@ -928,10 +1006,32 @@ static void tris_fill_item(void *job, uint32_t item)
         for (uint32_t y = s.y0; y <= s.y1; y++)
             for (uint32_t x0 = s.x0; x0 <= s.x1; x0 += 64) {
                 const uint32_t x1 = s.x1 - x0 < 64 ? s.x1 : x0 + 63;
-                uint32_t *row_at = at + (size_t)y * g->stride + x0;
-                for (uint64_t row = row_may_hit(j, &s, y, x0, x1); row; row &= row - 1)
-                    j->entries[row_at[__builtin_ctzll(row)]++] = t;
+                const uint32_t row_first = y * g->stride + x0;
+                for (uint64_t row = row_may_hit(j, &s, y, x0, x1); row; row &= row - 1) {
+                    const uint32_t cell = row_first + (uint32_t)__builtin_ctzll(row);
+                    if (j->cull && near < depths[cell]) continue;
+                    j->entries[backwards ? --at[cell] : at[cell]++] = t;
+                }
             }
+    }
+}
+
+/* With more than two items, each cell's pairs' entries moved up behind the first pair's, where
+ * the culled ones left gaps: each item a range of cells. */
+static void cells_join_item(void *job, uint32_t item)
+{
+    ray_bin_job *j = job;
+    const uint32_t cells = j->g.cells, first = cell_item_first(j, item), end = cell_item_first(j, item + 1);
+    for (uint32_t c = first; c < end; c++) {
+        if (j->cell_start[c] == j->cell_start[c + 1]) continue;
+        uint32_t *pair_end = &j->counts[(size_t)cells + c], at = *pair_end;
+        for (uint32_t i = 2; i < j->items; i += 2) {
+            const uint32_t from = j->counts[(size_t)i * cells + c];
+            const uint32_t to = i + 1 < j->items ? j->counts[(size_t)(i + 1) * cells + c] : j->cell_start[c + 1];
+            memmove(&j->entries[at], &j->entries[from], (size_t)(to - from) * sizeof *j->entries);
+            at += to - from;
+        }
+        *pair_end = at;
     }
 }
 
@@ -1199,8 +1299,10 @@ static ray_bin_outcome plan(core *c, ray_bin_job *j, ray_bin_limits limits, ray_
     double bounds[4] = { INFINITY, -INFINITY, INFINITY, -INFINITY };
     uint32_t valid = 0;
     float step[2] = { INFINITY, INFINITY };
+    bool tmin_positive = false;
     for (uint32_t i = 0; i < ray_items; i++) {
         const ray_item_result *res = &j->ray_results[i];
+        tmin_positive |= res->tmin_positive;
         if (res->origin_differs) return RAY_BIN_ORIGINS_DIFFER;
         if (res->wide_angle) return RAY_BIN_WIDE_ANGLE;
         bounds[0] = min_d(bounds[0], res->bounds[0]);
@@ -1237,6 +1339,12 @@ static ray_bin_outcome plan(core *c, ray_bin_job *j, ray_bin_limits limits, ray_
      * begin, may then list a triangle near the box's edge that no ray of it tests. Not where a
      * step of dx or dy in float would no longer be exact. */
     j->raster = on_lattice && j->g.gx <= (1u << 22) && j->g.gy <= (1u << 22);
+    /* A ray that starts past its origin may pass a triangle that hides others from the origin. */
+    j->cull = j->raster && !tmin_positive;
+    if (j->cull &&
+        !(*ok = (j->depths = scratch_array(c, m, ARRAY_DEPTHS, (size_t)cells * j->items, sizeof *j->depths)) &&
+                (j->tri_near = scratch_array(c, m, ARRAY_TRI_NEAR, j->tri_count, sizeof *j->tri_near))))
+        return RAY_BIN_TOO_LONG;
     if (j->raster) {
         for (int k = 0; k < 2; k++) {
             /* The offsets lie within 0.25 .. 0.75: both differences from the centre are exact
@@ -1280,8 +1388,9 @@ static ray_bin_outcome plan(core *c, ray_bin_job *j, ray_bin_limits limits, ray_
     if (total > limits.max_entries || longest > limits.max_list) return RAY_BIN_TOO_LONG;
     work_pool_run(j->pool, j->items, cells_place_item, NULL, j);
     j->cell_start[cells] = (uint32_t)total;
-    *out = (ray_bins){ .ray_cell = j->ray_cell, .cell_start = j->cell_start,
-                       .entry_count = (uint32_t)total, .longest = longest, .on_lattice = on_lattice };
+    *out = (ray_bins){ .ray_cell = j->ray_cell, .cell_start = j->cell_start, .cell_first = j->counts,
+                       .cell_end = j->items > 1 ? j->counts + cells : j->cell_start + 1,
+                       .entry_count = (uint32_t)total, .longest = longest, .on_lattice = on_lattice, .culled = j->cull };
     return RAY_BIN_BUILT;
 }
 
@@ -1358,6 +1467,7 @@ void RAY_BIN_ENTRY(ray_bin_fill)(ray_bins *b, uint32_t *entries)
     ray_bin_job *j = b->job;
     j->entries = entries;
     work_pool_run(j->pool, j->items, tris_fill_item, NULL, j);
+    if (j->items > 2) work_pool_run(j->pool, j->items, cells_join_item, NULL, j);
     /* The pool's threads are idle from here on. */
     work_pool_destroy(j->pool);
     j->pool = NULL;

@@ -10,7 +10,10 @@
  * of about one cell a ray. A ray's list then holds every triangle the BVH's leaves could give it
  * a hit on, and the device tests them with the same test and tie rule (closest distance, then
  * lowest prim_id): the same hits, bit for bit. Ray classification (Arvo and Kirk 1987) with the
- * origin fixed; a rasteriser whose coverage test is the ray's own intersection test.
+ * origin fixed; a rasteriser whose coverage test is the ray's own intersection test. Where the
+ * rays lie on a camera's lattice and start at the origin, a list leaves out the triangles wholly
+ * behind one that the ray surely hits (occlusion culling, its test the coverage test with the
+ * edges moved inwards): none of those can be its closest hit.
  *
  * Internal; the library's allocator, no printing. */
 #ifndef VKRT_RAY_BIN_H
@@ -31,9 +34,12 @@ typedef struct ray_bin_job ray_bin_job;
 
 typedef struct ray_bins {
     const uint32_t *ray_cell;   /* each ray's cell (RAY_BIN_NO_CELL: none) */
-    const uint32_t *cell_start; /* each cell's first entry, then one past the last cell's last */
-    uint32_t entry_count;       /* all lists together */
-    uint32_t longest;           /* the longest list */
+    const uint32_t *cell_start; /* each cell's room in the entries, from its first, then one past
+                                   the last cell's: a cell without room has an empty list */
+    const uint32_t *cell_first, *cell_end; /* once filled: each cell's list (within its room) */
+    uint32_t entry_count;       /* the room of all lists together (they may leave some unwritten) */
+    uint32_t longest;           /* the longest list's room */
+    bool culled;                /* lists leave out triangles hidden behind others */
     bool on_lattice;            /* the rays' projections lie on a regular lattice (a camera's
                                    pixel centres), a cell each: a triangle between them is in
                                    no list without a test */
@@ -83,16 +89,17 @@ vkrt_result ray_bin_plan(core *c, ray_bin_scratch **keep, const vkrt_ray *rays, 
 vkrt_result ray_bin_plan_camera(core *c, ray_bin_scratch **keep, const vkrt_gpu_push *camera,
                                 const vkrt_gpu_tri *tris, uint32_t tri_count, const vkrt_gpu_node *box,
                                 ray_bin_limits limits, uint32_t threads, ray_bins *out, ray_bin_outcome *out_outcome);
-/* Writes the lists, b->entry_count triangle indices, into `entries`, each cell's in the
- * triangles' order. */
+/* Writes the lists into `entries` (b->entry_count words, of which the culled triangles' room
+ * stays unwritten), each cell's in the triangles' order. */
 void ray_bin_fill(ray_bins *b, uint32_t *entries);
 
-/* Ray i's list: its first entry and its entry count. */
+/* Ray i's list, once ray_bin_fill has written them: its first entry and its entry count. */
 static inline void ray_bin_list(const ray_bins *b, uint32_t i, uint32_t out[2])
 {
     const uint32_t cell = b->ray_cell[i];
-    out[0] = cell == RAY_BIN_NO_CELL ? 0 : b->cell_start[cell];
-    out[1] = cell == RAY_BIN_NO_CELL ? 0 : b->cell_start[cell + 1] - b->cell_start[cell];
+    const bool none = cell == RAY_BIN_NO_CELL || b->cell_start[cell] == b->cell_start[cell + 1];
+    out[0] = none ? 0 : b->cell_first[cell];
+    out[1] = none ? 0 : b->cell_end[cell] - out[0];
 }
 
 /* As ray_cull_compact (ray_cull.h) for rays the lists were planned for: reads rays first ..
