@@ -130,12 +130,16 @@ struct ray_bin_job {
     /* On a lattice, where every ray starts at the origin (tmin 0): the lists leave out a triangle
      * wherever it lies wholly behind a triangle that every ray of the cell surely hits, which
      * then takes every such ray's closest hit before it (occlusion culling). Depths are
-     * distances along the axis, kept as depth_key()s. */
+     * distances along the axis in 65,535 steps over the scene's box (depth_z0 on, depth_scale
+     * steps a unit), sixteen bits a cell: half the memory of a float's, which the count and the
+     * fill read at random. */
     bool cull;
-    uint32_t *depths;          /* per triangle item, a cell each: the nearest depth a ray of the
-                                  cell surely hits a triangle by (0: none found); item 0's the
-                                  items' together once the scan has run */
-    uint32_t *tri_near;        /* the depth no point of the triangle is nearer than */
+    float depth_z0, depth_scale;
+    uint16_t *depths;          /* per triangle item, a cell each: 65,535 less the farthest step of
+                                  the nearest triangle that a ray of the cell surely hits (0:
+                                  none found); item 0's the items' together once the scan has
+                                  run */
+    uint16_t *tri_near;        /* the step no point of the triangle is nearer than */
     ray_item_result *ray_results;
     float *ray_ab;             /* 2 a ray; NaN for a ray that gets no cell */
     uint32_t *ray_cell;
@@ -453,7 +457,7 @@ static void cells_place_item(void *job, uint32_t item)
             }
             if (j->cull)
                 for (uint32_t i = 1; i < j->items; i++) {
-                    const uint32_t d = j->depths[(size_t)i * cells + c + k];
+                    const uint16_t d = j->depths[(size_t)i * cells + c + k];
                     if (d > j->depths[c + k]) j->depths[c + k] = d;
                 }
         }
@@ -474,7 +478,9 @@ typedef struct projected8 {
     /* The edges moved inwards as c is outwards: a point p with n . p >= c_in for all three lies
      * in the triangle with every ray of its cell (+infinity where the edges are not sure). */
     float c_in[3][8];
-    float depth_near[8], depth_far[8]; /* depths along the axis no point of it passes, with room */
+    /* Culling: the steps of depth no point of the triangle is nearer than, and 65,535 less the
+     * step none is farther than. */
+    int32_t near_step[8], far_key[8];
 } projected8;
 
 /* grid_coord4 eight lanes at a time: the same bits lane for lane. */
@@ -603,8 +609,17 @@ static unsigned project_triangles(const ray_bin_job *j, uint32_t t, uint32_t end
      * of far, also keeps a culled triangle's hits beyond any rounding of the closer one's
      * distance. */
     const float8 room = f8_mul(far, f8_set1(0x1p-14f));
-    f8_store(out->depth_near, f8_max(f8_sub(min_z, room), f8_set1(0.0f)));
-    f8_store(out->depth_far, f8_add(max_z, room));
+    if (j->cull) {
+        /* In steps, a step more each way than their rounding. */
+        const float8 z0 = f8_set1(j->depth_z0), scale = f8_set1(j->depth_scale), zero = f8_set1(0.0f);
+        const float8 top = f8_set1(65535.0f), one = f8_set1(1.0f);
+        const float8 near = f8_max(f8_mul(f8_sub(f8_sub(min_z, room), z0), scale), zero);
+        const float8 far_steps = f8_min(f8_max(f8_mul(f8_sub(f8_add(max_z, room), z0), scale), zero), top);
+        const float8 near_step = f8_max(f8_sub(f8_trunc(f8_min(near, top)), one), zero);
+        const float8 far_step = f8_min(f8_add(f8_add(f8_trunc(far_steps), one), one), top);
+        f8_truncate(near_step, out->near_step);
+        f8_truncate(f8_sub(top, far_step), out->far_key);
+    }
     float8 first_x, first_y;
     spans_of8(box[0], box[1], g->a0, g->sa, g->gx, j->offset_min[0], j->offset_max[0], out->span[0], out->span[1],
               &first_x, out->across[0]);
@@ -791,15 +806,6 @@ static uint64_t transpose_bits8(uint64_t x)
     return x ^ t ^ (t << 28);
 }
 
-/* A depth (>= 0) as a key whose unsigned order is the reverse of the depths': the nearest is the
- * greatest, and 0, which no depth gives, stands for none. */
-static uint32_t depth_key(float depth)
-{
-    uint32_t bits;
-    memcpy(&bits, &depth, sizeof bits);
-    return UINT32_MAX - bits;
-}
-
 /* On a lattice (raster), the cells of the spans of p's lanes (lane k's w[k] wide and n[k] cells,
  * at most 64; none where n[k] is 0) that pass their edges: as count_triangle's masks (bit
  * width dy + dx), into cells[].
@@ -852,7 +858,7 @@ static void raster_spans8(const projected8 *p, float8 w, float8 n, uint64_t cell
  * as count_triangle does; false where *visited passes `budget`. Without a branch a triangle but
  * for the rare one over more than 64 cells (count_triangle's) and for its cells past the first. */
 static bool count_raster8(ray_bin_job *j, uint32_t t8, uint32_t lanes, const projected8 *p, uint32_t *count,
-                          uint32_t *depths, uint64_t *visited, uint64_t budget)
+                          uint16_t *depths, uint64_t *visited, uint64_t budget)
 {
     const uint32_t stride = j->g.stride;
     /* The spans' shapes in float (exact: a grid's side is at most 2^22 cells), without a branch
@@ -871,7 +877,7 @@ static bool count_raster8(ray_bin_job *j, uint32_t t8, uint32_t lanes, const pro
     raster_spans8(p, w, n_small, cells, inner);
     for (uint32_t k = 0; k < lanes; k++) {
         const uint32_t t = t8 + k;
-        if (j->cull) j->tri_near[t] = depth_key(p->depth_near[k]);
+        if (j->cull) j->tri_near[t] = (uint16_t)p->near_step[k];
         if (big >> k & 1u) {
             tri_test s;
             tri_test_of(p, k, &s);
@@ -888,9 +894,9 @@ static bool count_raster8(ray_bin_job *j, uint32_t t8, uint32_t lanes, const pro
             count[cell0 + span_cell((uint32_t)__builtin_ctzll(left), width, stride)]++;
         if (j->cull && inner[k]) {
             /* The cells whose rays surely hit it: none finds its closest hit farther away. */
-            const uint32_t key = depth_key(p->depth_far[k]);
+            const uint16_t key = (uint16_t)p->far_key[k];
             for (uint64_t sure = inner[k]; sure; sure &= sure - 1) {
-                uint32_t *d = &depths[cell0 + span_cell((uint32_t)__builtin_ctzll(sure), width, stride)];
+                uint16_t *d = &depths[cell0 + span_cell((uint32_t)__builtin_ctzll(sure), width, stride)];
                 *d = key > *d ? key : *d;
             }
         }
@@ -904,7 +910,7 @@ static bool count_raster8(ray_bin_job *j, uint32_t t8, uint32_t lanes, const pro
 
 /* Counts triangles first .. end - 1 into `count`; false, with the item's flag set, where the
  * lists cannot be built. */
-static bool count_range(ray_bin_job *j, uint32_t item, uint32_t first, uint32_t end, uint32_t *count, uint32_t *depths)
+static bool count_range(ray_bin_job *j, uint32_t item, uint32_t first, uint32_t end, uint32_t *count, uint16_t *depths)
 {
     const uint64_t before = atomic_load_explicit(&j->visited, memory_order_relaxed);
     const uint64_t budget = j->cell_budget > before ? j->cell_budget - before : 0;
@@ -951,7 +957,7 @@ static void tris_count_item(void *job, uint32_t item)
     ray_bin_job *j = job;
     uint32_t *count = j->counts + (size_t)item * j->g.cells;
     memset(count, 0, (size_t)j->g.cells * sizeof *count);
-    uint32_t *depths = j->cull ? j->depths + (size_t)item * j->g.cells : NULL;
+    uint16_t *depths = j->cull ? j->depths + (size_t)item * j->g.cells : NULL;
     if (depths) memset(depths, 0, (size_t)j->g.cells * sizeof *depths);
     const uint32_t segment = item / 2, start = tri_segment_first(j, segment), end = tri_segment_first(j, segment + 1);
     const uint32_t chunks = core_div_up(end - start, j->tri_chunk);
@@ -983,17 +989,18 @@ static void tris_fill_item(void *job, uint32_t item)
      * (cells_place_item). */
     const bool backwards = item % 2 == 0;
     const uint32_t first = j->tri_first[item], end = j->tri_end[item];
-    const uint32_t *depths = j->depths;
+    const uint16_t *depths = j->depths;
     for (uint32_t n = 0; n < end - first; n++) {
         const uint32_t t = backwards ? end - 1 - n : first + n;
         const uint32_t width = j->tri_width[t];
-        /* Culling, a cell whose rays surely hit a triangle nearer than all of t lists no t. */
-        const uint32_t near = j->cull ? j->tri_near[t] : UINT32_MAX;
+        /* Culling, a cell whose rays surely hit a triangle nearer than all of t lists no t: t's
+         * nearest step past the other's farthest (65,535 less the cell's depth). */
+        const uint32_t near = j->cull ? j->tri_near[t] : 0;
         if (width) {
             /* The cells the count noted, in its order. */
             for (uint64_t cells = j->tri_cells[t]; cells; cells &= cells - 1) {
                 const uint32_t cell = j->tri_cell[t] + span_cell((uint32_t)__builtin_ctzll(cells), width, g->stride);
-                if (j->cull && near < depths[cell]) continue;
+                if (j->cull && near + depths[cell] > 65535u) continue;
                 j->entries[backwards ? --at[cell] : at[cell]++] = t;
             }
             continue;
@@ -1009,7 +1016,7 @@ static void tris_fill_item(void *job, uint32_t item)
                 const uint32_t row_first = y * g->stride + x0;
                 for (uint64_t row = row_may_hit(j, &s, y, x0, x1); row; row &= row - 1) {
                     const uint32_t cell = row_first + (uint32_t)__builtin_ctzll(row);
-                    if (j->cull && near < depths[cell]) continue;
+                    if (j->cull && near + depths[cell] > 65535u) continue;
                     j->entries[backwards ? --at[cell] : at[cell]++] = t;
                 }
             }
@@ -1341,6 +1348,20 @@ static ray_bin_outcome plan(core *c, ray_bin_job *j, ray_bin_limits limits, ray_
     j->raster = on_lattice && j->g.gx <= (1u << 22) && j->g.gy <= (1u << 22);
     /* A ray that starts past its origin may pass a triangle that hides others from the origin. */
     j->cull = j->raster && !tmin_positive;
+    if (j->cull) {
+        /* The scene's box's depths along the axis: 65,534 steps over them. */
+        double z[2] = { INFINITY, -INFINITY };
+        const float lo[3] = { j->box->bmin.x, j->box->bmin.y, j->box->bmin.z };
+        const float hi[3] = { j->box->bmax.x, j->box->bmax.y, j->box->bmax.z };
+        for (int corner = 0; corner < 8; corner++) {
+            double p[3];
+            for (int k = 0; k < 3; k++) p[k] = (double)((corner >> k) & 1 ? hi[k] : lo[k]) - j->fr.o[k];
+            z[0] = min_d(z[0], dot(p, j->fr.f));
+            z[1] = max_d(z[1], dot(p, j->fr.f));
+        }
+        j->depth_z0 = (float)z[0];
+        j->depth_scale = (float)(65534.0 / max_d(z[1] - z[0], 1e-30));
+    }
     if (j->cull &&
         !(*ok = (j->depths = scratch_array(c, m, ARRAY_DEPTHS, (size_t)cells * j->items, sizeof *j->depths)) &&
                 (j->tri_near = scratch_array(c, m, ARRAY_TRI_NEAR, j->tri_count, sizeof *j->tri_near))))
