@@ -1770,7 +1770,8 @@ static void ray_bin_lists_hold_every_triangle_a_ray_hits(void)
 /* Plans and fills the lists of rays[0 .. n) for scene s, which must find them on a lattice, and
  * checks every ray's by brute force (lists_hold_hits): the most rays one triangle has hits for,
  * 0 where no lists were built. */
-static size_t lattice_lists_hold_hits(vkrt_scene *s, const vkrt_ray *rays, uint32_t n, const char *what)
+static size_t lattice_lists_hold_hits(vkrt_scene *s, const vkrt_ray *rays, uint32_t n, const char *what,
+                                      size_t *out_hidden)
 {
     ray_bins bins;
     ray_bin_outcome outcome;
@@ -1783,7 +1784,7 @@ static size_t lattice_lists_hold_hits(vkrt_scene *s, const vkrt_ray *rays, uint3
     uint32_t *entries = malloc((size_t)(bins.entry_count ? bins.entry_count : 1) * sizeof *entries);
     memset(entries, 0xFF, (size_t)bins.entry_count * sizeof *entries);
     ray_bin_fill(&bins, entries);
-    const size_t most = lists_hold_hits(s, rays, n, 1, &bins, entries, what, NULL);
+    const size_t most = lists_hold_hits(s, rays, n, 1, &bins, entries, what, out_hidden);
     free(entries);
     ray_bins_destroy(&s->ctx->core, &bins);
     return most;
@@ -1801,7 +1802,7 @@ static void ray_bin_lattice_lists_hold_the_hits_of_big_triangles(void)
     const vkrt_camera close = { .eye = { 0.1f, 0.0f, 0.62f }, .target = { 0.1f, 0.0f, 0.0f }, .fov_y_degrees = 100.0f };
     vkrt_ray *rays = malloc((size_t)n * sizeof *rays);
     CHECK(vkrt_camera_rays(cpu, &close, w, h, rays, n) == VKRT_OK);
-    const size_t most = lattice_lists_hold_hits(s, rays, n, "teapot close up");
+    const size_t most = lattice_lists_hold_hits(s, rays, n, "teapot close up", NULL);
     CHECK_MSG(most > 64, "the largest triangle has hits for %zu rays: none spans over 64 cells", most);
     free(rays);
     vkrt_scene_destroy(s);
@@ -1836,7 +1837,72 @@ static void ray_bin_lattice_lists_hold_grazing_hits(void)
         }
     vkrt_scene *s = mesh_scene(cpu, pos, cols * rows, idx, tris, VKRT_BVH_BUILDER_DEFAULT);
     if (s) {
-        lattice_lists_hold_hits(s, rays, n, "grazed sheet");
+        lattice_lists_hold_hits(s, rays, n, "grazed sheet", NULL);
+        vkrt_scene_destroy(s);
+    }
+    free(idx);
+    free(pos);
+    free(rays);
+}
+
+/* Occlusion culling keeps every ray's closest hit: a sheet of triangles with every edge open and
+ * through pixel centres (half of the grazed sheet's, the other half left out) before a back
+ * plane, where a ray on an edge may miss the sheet and hit the plane (the cover test's edges
+ * moved inwards by the may-hit test's tolerance: without it, some of those rays lose the plane);
+ * and nine narrow triangles 0.1 to 0.9 steps of depth (2^-16 of the scene's) before a wider one,
+ * all flat to the view, which their rays hit first (the depths' room and steps rounded outwards:
+ * without both, some are culled behind the wider one). The lists leave out the plane behind the
+ * sheet. */
+static void ray_bin_lattice_culling_keeps_the_closest_hits(void)
+{
+    const uint32_t w = 97, h = 73, n = w * h, cols = w / 3 + 1, rows = h / 3 + 1;
+    const vkrt_camera view = { .eye = { 0.0f, 0.0f, 1.5f }, .target = { 0.0f, 0.0f, 0.0f }, .fov_y_degrees = 45.0f };
+    vkrt_ray *rays = malloc((size_t)n * sizeof *rays);
+    CHECK(vkrt_camera_rays(cpu, &view, w, h, rays, n) == VKRT_OK);
+    enum { NARROW = 9 };
+    const uint32_t sheet = cols * rows, extra = 7 + 3 * NARROW;
+    float *pos = malloc(((size_t)sheet + extra) * 3 * sizeof *pos);
+    uint32_t *idx = malloc(((size_t)(cols - 1) * (rows - 1) + 3 + NARROW) * 3 * sizeof *idx), tris = 0;
+    for (uint32_t y = 0; y < rows; y++)
+        for (uint32_t x = 0; x < cols; x++) {
+            const vkrt_ray *r = &rays[(size_t)(3 * y) * w + 3 * x];
+            const float depth = 1.2f + 0.05f * (float)((x * 7 + y * 3) % 5);
+            for (int k = 0; k < 3; k++) pos[(y * cols + x) * 3 + k] = r->origin[k] + r->dir[k] * depth;
+        }
+    /* The left half's quads, one triangle of each (the diagonals both ways). */
+    for (uint32_t y = 0; y + 1 < rows; y++)
+        for (uint32_t x = 0; x + 1 < cols / 2; x++) {
+            const uint32_t a = y * cols + x, b = a + 1, c = a + cols, d = c + 1;
+            const uint32_t tri[2][3] = { { a, b, d }, { b, c, a } };
+            memcpy(idx + 3 * tris, tri[(x + y) % 2], sizeof tri[0]);
+            tris++;
+        }
+    /* The back plane at depth 2.5, the wide triangle at 2.3 on the right, the narrow ones within it
+     * (the scene's box spans depths 1.2 to 2.5: a step is 1.98e-5). */
+    const float more[7][3] = { { -3.0f, -3.0f, -1.0f }, { 3.0f, -3.0f, -1.0f }, { 3.0f, 3.0f, -1.0f },
+                               { -3.0f, 3.0f, -1.0f },  { 0.1f, -0.8f, -0.8f }, { 1.2f, -0.8f, -0.8f },
+                               { 1.2f, 0.8f, -0.8f } };
+    float *at = pos + (size_t)sheet * 3;
+    memcpy(at, more, sizeof more);
+    at += 3 * 7;
+    for (int i = 0; i < NARROW; i++) {
+        const float y = -0.75f + 0.12f * (float)i, z = -0.8f + 0.1f * (float)(i + 1) * 1.98e-5f;
+        const float corners[3][3] = { { 0.9f, y, z }, { 1.15f, y, z }, { 1.15f, y + 0.1f, z } };
+        memcpy(at, corners, sizeof corners);
+        at += 9;
+    }
+    const uint32_t more_idx[3][3] = { { sheet, sheet + 1, sheet + 2 },
+                                      { sheet, sheet + 2, sheet + 3 },
+                                      { sheet + 4, sheet + 5, sheet + 6 } };
+    memcpy(idx + 3 * tris, more_idx, sizeof more_idx);
+    tris += 3;
+    for (uint32_t i = 0; i < NARROW; i++, tris++)
+        for (uint32_t k = 0; k < 3; k++) idx[3 * tris + k] = sheet + 7 + 3 * i + k;
+    vkrt_scene *s = mesh_scene(cpu, pos, sheet + extra, idx, tris, VKRT_BVH_BUILDER_DEFAULT);
+    if (s) {
+        size_t hidden = 0;
+        lattice_lists_hold_hits(s, rays, n, "open sheet before a plane", &hidden);
+        CHECK_MSG(hidden > 0, "the plane behind the sheet and the wide triangle was never left out");
         vkrt_scene_destroy(s);
     }
     free(idx);
@@ -2748,6 +2814,7 @@ int main(void)
     RUN(ray_bin_lists_hold_every_triangle_a_ray_hits);
     RUN(ray_bin_lattice_lists_hold_the_hits_of_big_triangles);
     RUN(ray_bin_lattice_lists_hold_grazing_hits);
+    RUN(ray_bin_lattice_culling_keeps_the_closest_hits);
     RUN(ray_bin_says_why_rays_do_not_suit);
     RUN(ray_bin_gives_a_cell_to_every_ray_the_box_test_lets_in);
     RUN(ray_bin_camera_plan_lists_as_the_camera_rays_do);
