@@ -565,13 +565,12 @@ static unsigned project_triangles(const ray_bin_job *j, uint32_t t, uint32_t end
     float8 front = f8_eq(far, far);
     const vkrt_gpu_tri *tri[8];
     for (uint32_t k = 0; k < 8; k++) tri[k] = &j->tris[t + k < end ? t + k : t];
-    float8 o[3], f[3], r[3], u[3];
-    for (int k = 0; k < 3; k++) {
-        o[k] = wide8(fr->o4[k]);
-        f[k] = wide8(fr->f4[k]);
-        r[k] = wide8(fr->r4[k]);
-        u[k] = wide8(fr->u4[k]);
-    }
+    /* The frame's origin and axes in all eight lanes. */
+    const float4 *frame4[4] = { fr->o4, fr->f4, fr->r4, fr->u4 };
+    float8 axes[4][3];
+    for (int a = 0; a < 4; a++)
+        for (int k = 0; k < 3; k++) axes[a][k] = wide8(frame4[a][k]);
+    const float8 *o = axes[0], *f = axes[1], *r = axes[2], *u = axes[3];
     float8 pa[3], pb[3];
     for (int corner = 0; corner < 3; corner++) {
         float4 rows[2][4];

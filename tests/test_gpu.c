@@ -1808,6 +1808,25 @@ static void ray_bin_lattice_lists_hold_the_hits_of_big_triangles(void)
     vkrt_scene_destroy(s);
 }
 
+/* A 97 x 73 camera's rays (into *out_rays) and the corners of a bumpy sheet on every third of
+ * them, cols x rows corners each at its own depth along its ray (into pos), so that the sheet's
+ * edges pass through the pixel centres between them along rows, columns and diagonals, up to
+ * rounding. */
+static void sheet_on_every_third_ray(vkrt_ray **out_rays, uint32_t cols, uint32_t rows, float *pos)
+{
+    const uint32_t w = 97, h = 73;
+    const vkrt_camera view = { .eye = { 0.0f, 0.0f, 1.5f }, .target = { 0.0f, 0.0f, 0.0f }, .fov_y_degrees = 45.0f };
+    vkrt_ray *rays = malloc((size_t)w * h * sizeof *rays);
+    CHECK(vkrt_camera_rays(cpu, &view, w, h, rays, (size_t)w * h) == VKRT_OK);
+    for (uint32_t y = 0; y < rows; y++)
+        for (uint32_t x = 0; x < cols; x++) {
+            const vkrt_ray *r = &rays[(size_t)(3 * y) * w + 3 * x];
+            const float depth = 1.2f + 0.05f * (float)((x * 7 + y * 3) % 5);
+            for (int k = 0; k < 3; k++) pos[(y * cols + x) * 3 + k] = r->origin[k] + r->dir[k] * depth;
+        }
+    *out_rays = rays;
+}
+
 /* The lattice's count against rays that graze its triangles: a bumpy sheet whose corners lie on
  * every third of a camera's rays (each at its own depth), so that its edges pass through the
  * pixel centres between them along rows, columns and diagonals, up to rounding. The watertight
@@ -1815,18 +1834,11 @@ static void ray_bin_lattice_lists_hold_the_hits_of_big_triangles(void)
  * (without the count's tolerances they miss some). */
 static void ray_bin_lattice_lists_hold_grazing_hits(void)
 {
-    const uint32_t w = 97, h = 73, n = w * h, cols = w / 3 + 1, rows = h / 3 + 1;
-    const vkrt_camera view = { .eye = { 0.0f, 0.0f, 1.5f }, .target = { 0.0f, 0.0f, 0.0f }, .fov_y_degrees = 45.0f };
-    vkrt_ray *rays = malloc((size_t)n * sizeof *rays);
-    CHECK(vkrt_camera_rays(cpu, &view, w, h, rays, n) == VKRT_OK);
+    const uint32_t n = 97 * 73, cols = 97 / 3 + 1, rows = 73 / 3 + 1;
     float *pos = malloc((size_t)cols * rows * 3 * sizeof *pos);
     uint32_t *idx = malloc((size_t)(cols - 1) * (rows - 1) * 6 * sizeof *idx), tris = 0;
-    for (uint32_t y = 0; y < rows; y++)
-        for (uint32_t x = 0; x < cols; x++) {
-            const vkrt_ray *r = &rays[(size_t)(3 * y) * w + 3 * x];
-            const float depth = 1.2f + 0.05f * (float)((x * 7 + y * 3) % 5);
-            for (int k = 0; k < 3; k++) pos[(y * cols + x) * 3 + k] = r->origin[k] + r->dir[k] * depth;
-        }
+    vkrt_ray *rays;
+    sheet_on_every_third_ray(&rays, cols, rows, pos);
     for (uint32_t y = 0; y + 1 < rows; y++)
         for (uint32_t x = 0; x + 1 < cols; x++) {
             const uint32_t a = y * cols + x, b = a + 1, c = a + cols, d = c + 1;
@@ -1855,20 +1867,12 @@ static void ray_bin_lattice_lists_hold_grazing_hits(void)
  * sheet. */
 static void ray_bin_lattice_culling_keeps_the_closest_hits(void)
 {
-    const uint32_t w = 97, h = 73, n = w * h, cols = w / 3 + 1, rows = h / 3 + 1;
-    const vkrt_camera view = { .eye = { 0.0f, 0.0f, 1.5f }, .target = { 0.0f, 0.0f, 0.0f }, .fov_y_degrees = 45.0f };
-    vkrt_ray *rays = malloc((size_t)n * sizeof *rays);
-    CHECK(vkrt_camera_rays(cpu, &view, w, h, rays, n) == VKRT_OK);
     enum { NARROW = 9 };
-    const uint32_t sheet = cols * rows, extra = 7 + 3 * NARROW;
+    const uint32_t n = 97 * 73, cols = 97 / 3 + 1, rows = 73 / 3 + 1, sheet = cols * rows, extra = 7 + 3 * NARROW;
     float *pos = malloc(((size_t)sheet + extra) * 3 * sizeof *pos);
     uint32_t *idx = malloc(((size_t)(cols - 1) * (rows - 1) + 3 + NARROW) * 3 * sizeof *idx), tris = 0;
-    for (uint32_t y = 0; y < rows; y++)
-        for (uint32_t x = 0; x < cols; x++) {
-            const vkrt_ray *r = &rays[(size_t)(3 * y) * w + 3 * x];
-            const float depth = 1.2f + 0.05f * (float)((x * 7 + y * 3) % 5);
-            for (int k = 0; k < 3; k++) pos[(y * cols + x) * 3 + k] = r->origin[k] + r->dir[k] * depth;
-        }
+    vkrt_ray *rays;
+    sheet_on_every_third_ray(&rays, cols, rows, pos);
     /* The left half's quads, one triangle of each (the diagonals both ways). */
     for (uint32_t y = 0; y + 1 < rows; y++)
         for (uint32_t x = 0; x + 1 < cols / 2; x++) {
