@@ -107,7 +107,8 @@ static inline void ray_bin_list(const ray_bins *b, uint32_t i, uint32_t out[2])
  * that is not empty or all are read; those are copied to out_rays[0..] with their positions
  * (from rays[0]) in out_index, and every other ray read gets a miss in out_hits at its
  * position. A ray whose list is empty misses every triangle: the lists hold every triangle a
- * ray may hit, and a ray that cannot enter the scene's box has none. Three in four of the
+ * ray may hit first (culling leaves in the nearest triangle a cell's rays surely hit), and a ray
+ * that cannot enter the scene's box has none. Three in four of the
  * standard view's rays of the dragons do, each a SIMD lane's work on a CPU device. Returns the
  * rays copied; *out_read is the rays read. */
 size_t ray_bin_compact(const ray_bins *b, const vkrt_ray *rays, size_t first, size_t count, size_t room,
