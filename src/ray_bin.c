@@ -618,6 +618,9 @@ static unsigned project_triangles(const ray_bin_job *j, uint32_t t, uint32_t end
         const float8 far_step = f8_min(f8_add(f8_add(f8_trunc(far_steps), one), one), top);
         f8_truncate(near_step, out->near_step);
         f8_truncate(f8_sub(top, far_step), out->far_key);
+    } else {
+        memset(out->near_step, 0, sizeof out->near_step);
+        memset(out->far_key, 0, sizeof out->far_key);
     }
     float8 first_x, first_y;
     spans_of8(box[0], box[1], g->a0, g->sa, g->gx, j->offset_min[0], j->offset_max[0], out->span[0], out->span[1],
@@ -674,6 +677,8 @@ static uint32_t tri_segment_first(const ray_bin_job *j, uint32_t segment)
 typedef struct tri_test {
     float4 box[4];
     float4 nx[3], ny[3], c[3];
+    float4 c_in[3];   /* projected8's, the edges moved inwards */
+    uint16_t far_key; /* projected8's, culling */
     uint32_t x0, x1, y0, y1;
 } tri_test;
 
@@ -684,7 +689,9 @@ static void tri_test_of(const projected8 *p, uint32_t lane, tri_test *t)
         t->nx[k] = f4_set1(p->nx[k][lane]);
         t->ny[k] = f4_set1(p->ny[k][lane]);
         t->c[k] = f4_set1(p->c[k][lane]);
+        t->c_in[k] = f4_set1(p->c_in[k][lane]);
     }
+    t->far_key = (uint16_t)p->far_key[lane];
     t->x0 = (uint32_t)p->span[0][lane];
     t->x1 = (uint32_t)p->span[1][lane];
     t->y0 = (uint32_t)p->span[2][lane];
@@ -712,13 +719,24 @@ static unsigned cells_may_hit4(const ray_bin_job *j, size_t block, const tri_tes
 }
 
 /* Which of four cells (dx, dy) from the first of t's span, on a lattice (raster), pass t's edges
- * in the grid's units (project_triangles): bit k for lane k's. t's box goes unread: the spans
- * hold it. */
-static unsigned cells_raster4(const tri_test *t, float4 dx, float4 dy)
+ * in the grid's units (project_triangles) moved to offsets c (t's c, or c_in for the cells whose
+ * rays surely hit it): bit k for lane k's. t's box goes unread: the spans hold it. */
+static unsigned cells_raster4(const tri_test *t, const float4 c[3], float4 dx, float4 dy)
 {
     float4 in = f4_eq(dx, dx);
-    for (int k = 0; k < 3; k++) in = f4_and(in, f4_ge(f4_add(f4_mul(t->nx[k], dx), f4_mul(t->ny[k], dy)), t->c[k]));
+    for (int k = 0; k < 3; k++) in = f4_and(in, f4_ge(f4_add(f4_mul(t->nx[k], dx), f4_mul(t->ny[k], dy)), c[k]));
     return f4_bits(in);
+}
+
+/* On a lattice, the cells of row y, columns x0 .. x1 (at most 64), that pass t's edges moved to
+ * offsets c: bit x - x0, the bits past x1 left in. */
+static uint64_t row_raster(const tri_test *t, const float4 c[3], uint32_t y, uint32_t x0, uint32_t x1)
+{
+    uint64_t bits = 0;
+    const float4 dy = f4_set1((float)(y - t->y0)), steps = f4_set(0.0f, 1.0f, 2.0f, 3.0f);
+    for (uint32_t x = x0; x <= x1; x += 4)
+        bits |= (uint64_t)cells_raster4(t, c, f4_add(f4_set1((float)(x - t->x0)), steps), dy) << (x - x0);
+    return bits;
 }
 
 /* The cells of row y, columns x0 .. x1 (at most 64), that may hold rays that hit t: bit
@@ -727,9 +745,7 @@ static uint64_t row_may_hit(const ray_bin_job *j, const tri_test *t, uint32_t y,
 {
     uint64_t bits = 0;
     if (j->raster) {
-        const float4 dy = f4_set1((float)(y - t->y0)), steps = f4_set(0.0f, 1.0f, 2.0f, 3.0f);
-        for (uint32_t x = x0; x <= x1; x += 4)
-            bits |= (uint64_t)cells_raster4(t, f4_add(f4_set1((float)(x - t->x0)), steps), dy) << (x - x0);
+        bits = row_raster(t, t->c, y, x0, x1);
     } else {
         /* From the block that holds x0: its cells before x0 shifted out. */
         const size_t row = (size_t)y * j->g.stride;
@@ -759,8 +775,8 @@ static uint32_t span_cell(uint32_t bit, uint32_t width, uint32_t stride)
 
 /* Counts triangle t (test `s`) into the cells whose rays may hit it; false where *visited
  * passes `budget`. */
-static bool count_triangle(ray_bin_job *j, uint32_t t, const tri_test *s, uint32_t *count, uint64_t *visited,
-                           uint64_t budget)
+static bool count_triangle(ray_bin_job *j, uint32_t t, const tri_test *s, uint32_t *count, uint16_t *depths,
+                           uint64_t *visited, uint64_t budget)
 {
     const grid *g = &j->g;
     const uint32_t width = s->x1 - s->x0 + 1, height = s->y1 - s->y0 + 1;
@@ -788,8 +804,15 @@ static bool count_triangle(ray_bin_job *j, uint32_t t, const tri_test *s, uint32
     for (uint32_t y = s->y0; y <= s->y1; y++)
         for (uint32_t x0 = s->x0; x0 <= s->x1; x0 += 64) {
             const uint32_t x1 = s->x1 - x0 < 64 ? s->x1 : x0 + 63;
-            uint32_t *row_count = count + (size_t)y * g->stride + x0;
-            for (uint64_t row = row_may_hit(j, s, y, x0, x1); row; row &= row - 1) row_count[__builtin_ctzll(row)]++;
+            const size_t row_first = (size_t)y * g->stride + x0;
+            const uint64_t may = row_may_hit(j, s, y, x0, x1);
+            for (uint64_t row = may; row; row &= row - 1) count[row_first + __builtin_ctzll(row)]++;
+            if (!depths) continue;
+            /* Culling (a lattice's): the cells whose rays surely hit it, as count_raster8's. */
+            for (uint64_t sure = row_raster(s, s->c_in, y, x0, x1) & may; sure; sure &= sure - 1) {
+                uint16_t *d = &depths[row_first + __builtin_ctzll(sure)];
+                *d = s->far_key > *d ? s->far_key : *d;
+            }
         }
     return true;
 }
@@ -880,7 +903,7 @@ static bool count_raster8(ray_bin_job *j, uint32_t t8, uint32_t lanes, const pro
         if (big >> k & 1u) {
             tri_test s;
             tri_test_of(p, k, &s);
-            if (!count_triangle(j, t, &s, count, visited, budget)) return false;
+            if (!count_triangle(j, t, &s, count, depths, visited, budget)) return false;
             continue;
         }
         const uint32_t cell0 = small >> k & 1u ? (uint32_t)p->span[2][k] * stride + (uint32_t)p->span[0][k] : 0u;
@@ -938,7 +961,7 @@ static bool count_range(ray_bin_job *j, uint32_t item, uint32_t first, uint32_t 
             }
             tri_test s;
             tri_test_of(&p, lane, &s);
-            if (!count_triangle(j, t8 + lane, &s, count, &visited, budget)) {
+            if (!count_triangle(j, t8 + lane, &s, count, NULL, &visited, budget)) {
                 j->item_over[item] = true;
                 return false;
             }

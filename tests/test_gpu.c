@@ -1859,8 +1859,9 @@ static void ray_bin_lattice_lists_hold_grazing_hits(void)
 
 /* Occlusion culling keeps every ray's closest hit: a sheet of triangles with every edge open and
  * through pixel centres (half of the grazed sheet's, the other half left out) before a back
- * plane, where a ray on an edge may miss the sheet and hit the plane (the cover test's edges
- * moved inwards by the may-hit test's tolerance: without it, some of those rays lose the plane);
+ * plane, and a triangle of over 64 cells whose edges pass through them too, where a ray on an
+ * edge may miss the sheet or the triangle and hit what lies behind (the cover test's edges moved
+ * inwards by the may-hit test's tolerance: without it, some of those rays lose their hit);
  * and nine narrow triangles 0.1 to 0.9 steps of depth (2^-16 of the scene's) before a wider one,
  * all flat to the view, which their rays hit first (the depths' room and steps rounded outwards:
  * without both, some are culled behind the wider one). The lists leave out the plane behind the
@@ -1868,9 +1869,9 @@ static void ray_bin_lattice_lists_hold_grazing_hits(void)
 static void ray_bin_lattice_culling_keeps_the_closest_hits(void)
 {
     enum { NARROW = 9 };
-    const uint32_t n = 97 * 73, cols = 97 / 3 + 1, rows = 73 / 3 + 1, sheet = cols * rows, extra = 7 + 3 * NARROW;
+    const uint32_t n = 97 * 73, cols = 97 / 3 + 1, rows = 73 / 3 + 1, sheet = cols * rows, extra = 10 + 3 * NARROW;
     float *pos = malloc(((size_t)sheet + extra) * 3 * sizeof *pos);
-    uint32_t *idx = malloc(((size_t)(cols - 1) * (rows - 1) + 3 + NARROW) * 3 * sizeof *idx), tris = 0;
+    uint32_t *idx = malloc(((size_t)(cols - 1) * (rows - 1) + 4 + NARROW) * 3 * sizeof *idx), tris = 0;
     vkrt_ray *rays;
     sheet_on_every_third_ray(&rays, cols, rows, pos);
     /* The left half's quads, one triangle of each (the diagonals both ways). */
@@ -1902,6 +1903,15 @@ static void ray_bin_lattice_culling_keeps_the_closest_hits(void)
     tris += 3;
     for (uint32_t i = 0; i < NARROW; i++, tris++)
         for (uint32_t k = 0; k < 3; k++) idx[3 * tris + k] = sheet + 7 + 3 * i + k;
+    /* The big triangle, its corners on the rays of pixels (57, 12), (75, 12) and (75, 30) at 1.8,
+     * before the wide one and clear of the narrow ones. */
+    const uint32_t big_pixels[3][2] = { { 57, 12 }, { 75, 12 }, { 75, 30 } };
+    for (uint32_t k = 0; k < 3; k++) {
+        const vkrt_ray *r = &rays[(size_t)big_pixels[k][1] * 97 + big_pixels[k][0]];
+        for (int a = 0; a < 3; a++) at[3 * k + a] = r->origin[a] + r->dir[a] * 1.8f;
+        idx[3 * tris + k] = sheet + 7 + 3 * NARROW + k;
+    }
+    tris++;
     vkrt_scene *s = mesh_scene(cpu, pos, sheet + extra, idx, tris, VKRT_BVH_BUILDER_DEFAULT);
     if (s) {
         size_t hidden = 0;
