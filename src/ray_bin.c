@@ -773,8 +773,13 @@ static uint32_t span_cell(uint32_t bit, uint32_t width, uint32_t stride)
     return dy * stride + (bit - dy * width);
 }
 
+/* Culling: a cell whose rays surely hit a triangle keeps the nearest such triangle's depth (the
+ * greatest key, 65,535 less its farthest step). */
+static void keep_nearer(uint16_t *depth, uint16_t key) { *depth = key > *depth ? key : *depth; }
+
 /* Counts triangle t (test `s`) into the cells whose rays may hit it; false where *visited
- * passes `budget`. */
+ * passes `budget`. Culling (depths not NULL), the cells of its rows whose rays surely hit it
+ * keep its depth. */
 static bool count_triangle(ray_bin_job *j, uint32_t t, const tri_test *s, uint32_t *count, uint16_t *depths,
                            uint64_t *visited, uint64_t budget)
 {
@@ -809,10 +814,8 @@ static bool count_triangle(ray_bin_job *j, uint32_t t, const tri_test *s, uint32
             for (uint64_t row = may; row; row &= row - 1) count[row_first + __builtin_ctzll(row)]++;
             if (!depths) continue;
             /* Culling (a lattice's): the cells whose rays surely hit it, as count_raster8's. */
-            for (uint64_t sure = row_raster(s, s->c_in, y, x0, x1) & may; sure; sure &= sure - 1) {
-                uint16_t *d = &depths[row_first + __builtin_ctzll(sure)];
-                *d = s->far_key > *d ? s->far_key : *d;
-            }
+            for (uint64_t sure = row_raster(s, s->c_in, y, x0, x1) & may; sure; sure &= sure - 1)
+                keep_nearer(&depths[row_first + __builtin_ctzll(sure)], s->far_key);
         }
     return true;
 }
@@ -917,10 +920,8 @@ static bool count_raster8(ray_bin_job *j, uint32_t t8, uint32_t lanes, const pro
         if (j->cull && inner[k]) {
             /* The cells whose rays surely hit it: none finds its closest hit farther away. */
             const uint16_t key = (uint16_t)p->far_key[k];
-            for (uint64_t sure = inner[k]; sure; sure &= sure - 1) {
-                uint16_t *d = &depths[cell0 + span_cell((uint32_t)__builtin_ctzll(sure), width, stride)];
-                *d = key > *d ? key : *d;
-            }
+            for (uint64_t sure = inner[k]; sure; sure &= sure - 1)
+                keep_nearer(&depths[cell0 + span_cell((uint32_t)__builtin_ctzll(sure), width, stride)], key);
         }
         j->tri_cell[t] = cell0;
         j->tri_cells[t] = cells[k];
@@ -1002,6 +1003,16 @@ static void tris_count_item(void *job, uint32_t item)
     j->tri_end[item] = backwards ? end : (edge < end ? edge : end);
 }
 
+/* Triangle t's entry in `cell`, at the position the item's `at` holds there (the first item of a
+ * pair writing backwards, the second forwards), unless culling leaves it out: its nearest step
+ * (near) past the farthest of the nearest triangle the cell's rays surely hit (65,535 less the
+ * cell's depth). */
+static void fill_entry(const ray_bin_job *j, uint32_t *at, uint32_t cell, uint32_t near, bool backwards, uint32_t t)
+{
+    if (j->cull && near + j->depths[cell] > 65535u) return;
+    j->entries[backwards ? --at[cell] : at[cell]++] = t;
+}
+
 static void tris_fill_item(void *job, uint32_t item)
 {
     ray_bin_job *j = job;
@@ -1011,20 +1022,15 @@ static void tris_fill_item(void *job, uint32_t item)
      * (cells_place_item). */
     const bool backwards = item % 2 == 0;
     const uint32_t first = j->tri_first[item], end = j->tri_end[item];
-    const uint16_t *depths = j->depths;
     for (uint32_t n = 0; n < end - first; n++) {
         const uint32_t t = backwards ? end - 1 - n : first + n;
         const uint32_t width = j->tri_width[t];
-        /* Culling, a cell whose rays surely hit a triangle nearer than all of t lists no t: t's
-         * nearest step past the other's farthest (65,535 less the cell's depth). */
         const uint32_t near = j->cull ? j->tri_near[t] : 0;
         if (width) {
             /* The cells the count noted, in its order. */
-            for (uint64_t cells = j->tri_cells[t]; cells; cells &= cells - 1) {
-                const uint32_t cell = j->tri_cell[t] + span_cell((uint32_t)__builtin_ctzll(cells), width, g->stride);
-                if (j->cull && near + depths[cell] > 65535u) continue;
-                j->entries[backwards ? --at[cell] : at[cell]++] = t;
-            }
+            for (uint64_t cells = j->tri_cells[t]; cells; cells &= cells - 1)
+                fill_entry(j, at, j->tri_cell[t] + span_cell((uint32_t)__builtin_ctzll(cells), width, g->stride), near,
+                           backwards, t);
             continue;
         }
         /* Projected again: lane 0 of eight copies of t, the same bits as its lane in the count. */
@@ -1036,11 +1042,8 @@ static void tris_fill_item(void *job, uint32_t item)
             for (uint32_t x0 = s.x0; x0 <= s.x1; x0 += 64) {
                 const uint32_t x1 = s.x1 - x0 < 64 ? s.x1 : x0 + 63;
                 const uint32_t row_first = y * g->stride + x0;
-                for (uint64_t row = row_may_hit(j, &s, y, x0, x1); row; row &= row - 1) {
-                    const uint32_t cell = row_first + (uint32_t)__builtin_ctzll(row);
-                    if (j->cull && near + depths[cell] > 65535u) continue;
-                    j->entries[backwards ? --at[cell] : at[cell]++] = t;
-                }
+                for (uint64_t row = row_may_hit(j, &s, y, x0, x1); row; row &= row - 1)
+                    fill_entry(j, at, row_first + (uint32_t)__builtin_ctzll(row), near, backwards, t);
             }
     }
 }
